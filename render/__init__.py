@@ -1,0 +1,1 @@
+"""Everything that draws or writes images, video and reports for orthosim."""
