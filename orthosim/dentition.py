@@ -1,0 +1,61 @@
+"""A dentition: the set of tooth models of one patient (parametric or from meshes), in the arch frame.
+
+Arch frame (the paper's): origin mid-arch, y up, the x-z plane the occlusal plane, +z anterior
+(toward the lips), +x toward the patient's left. Upper crowns point down (-y), lower crowns up.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .fdi import Arch, arch_of, arch_order
+from .tooth import Tooth
+
+
+@dataclass(frozen=True, eq=False)
+class Dentition:
+    teeth: dict[int, Tooth]  # FDI -> tooth model
+    description: str = ""
+    info: dict = field(default_factory=dict)  # how it was built (arch form, offsets, source files)
+
+    def __post_init__(self):
+        for number, tooth in self.teeth.items():
+            if number != tooth.fdi:
+                raise ValueError(f"tooth keyed {number} has FDI {tooth.fdi}")
+
+    @property
+    def fdis(self) -> list[int]:
+        """Present teeth, upper arch right to left, then lower arch right to left."""
+        present = set(self.teeth)
+        return arch_order(Arch.UPPER, present) + arch_order(Arch.LOWER, present)
+
+    def arch(self, arch: Arch) -> list[int]:
+        return arch_order(arch, set(self.teeth))
+
+    def rest_poses(self) -> dict[int, np.ndarray]:
+        return {n: self.teeth[n].rest_pose.copy() for n in self.fdis}
+
+    def adjacent_pairs(self, absent: set[int] = frozenset()) -> list[tuple[int, int]]:
+        """Neighbours along each arch, right to left, skipping teeth in `absent` (e.g. extracted)."""
+        pairs = []
+        for a in (Arch.UPPER, Arch.LOWER):
+            order = [t for t in self.arch(a) if t not in absent]
+            pairs += list(zip(order[:-1], order[1:]))
+        return pairs
+
+    def crown_centers(self, poses: dict[int, np.ndarray] | None = None) -> dict[int, np.ndarray]:
+        """FDI -> (3,) arch-frame crown centre (mm) under `poses` (rest poses by default)."""
+        out = {}
+        for n in self.fdis:
+            t = self.teeth[n]
+            out[n] = t.to_world(t.crown_center, None if poses is None else poses[n])
+        return out
+
+    def without(self, extracted: set[int]) -> "Dentition":
+        return Dentition({n: t for n, t in self.teeth.items() if n not in extracted}, self.description, self.info)
+
+
+def arch_of_tooth(fdi: int) -> Arch:
+    return arch_of(fdi)
