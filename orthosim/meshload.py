@@ -1,0 +1,333 @@
+"""Loading real tooth meshes (STL, OBJ, PLY) into `Tooth` models: validation, safe repair, local frames.
+
+A user's mesh is the one input most likely to be subtly broken (holes, flipped winding, metres
+instead of millimetres), and a broken mesh silently accepted would give a wrong simulation, so
+every file goes through `load_tooth_mesh`: it repairs what can be repaired without changing the
+shape (merging vertices, dropping degenerate or duplicate faces, filling single triangle or quad
+holes, fixing winding so the volume is positive) with a warning naming the file, and raises a
+one-line `MeshError` for anything else. `load_mesh_folder` turns a folder of per-tooth meshes that
+are already in the arch frame (see `orthosim.dentition`) into a `Dentition`, estimating each
+tooth's local frame (`orthosim.tooth`) from its shape; `tooth_from_mesh` is the shared step that
+places a mesh in its local frame given a long axis and a labial direction (the Open-Full-Jaw
+importer, `orthosim.openfulljaw`, uses it with the dataset's own axes). All lengths are mm.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from . import fdi as fdi_mod
+from .anatomy import dimensions
+from .dentition import Dentition
+from .errors import MeshError
+from .fdi import Arch
+from .tooth import Tooth, part_of_faces
+
+MESH_SUFFIXES = (".stl", ".obj", ".ply")
+
+# A human tooth (crown plus root) is 15-30 mm long and 5-12 mm wide, so its bounding-box diagonal
+# sits well inside these limits; a diagonal outside them means the file is in other units.
+TOOTH_DIAGONAL_MM = (8.0, 45.0)
+# Unit factors tried when the size is wrong, most common first: what each factor means.
+_UNIT_GUESSES = ((1000.0, "metres"), (25.4, "inches"), (10.0, "centimetres"), (0.001, "micrometres"))
+
+# Long axis estimated from the shape (PCA) must be within this angle of the arch frame's y axis;
+# beyond it the mesh is almost certainly not in the arch frame and the estimate would be nonsense.
+MAX_PCA_TILT_DEG = 60.0
+
+CEJ_RULE = (
+    "CEJ on the long axis at (occlusal-most point of the mesh along the axis) minus the Wheeler "
+    "crown height of the tooth type (orthosim.anatomy); root length = extent of the mesh below it"
+)
+
+
+class MeshRepairWarning(UserWarning):
+    """A tooth mesh was repaired on load; the message names the file and what was changed."""
+
+
+@dataclass(frozen=True)
+class ToothAxes:
+    """A tooth's anatomical directions in the arch frame (mm), used to build its local frame.
+
+    `long_axis` points from the apex toward the crown; `labial` need not be orthogonal to it
+    (it is orthogonalised); `point` is a point on the long axis (e.g. the crown centre), or None
+    to use the centroid of the mesh volume.
+    """
+
+    long_axis: np.ndarray  # (3,) arch frame, apex -> crown
+    labial: np.ndarray  # (3,) arch frame, toward the lips / cheek
+    point: np.ndarray | None = None  # (3,) arch frame, mm, a point on the long axis
+
+
+def load_tooth_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
+    """Read one tooth mesh (STL, OBJ or PLY), multiply by `scale`, validate it, repair it if safe.
+
+    Returns a closed mesh with consistent outward winding (positive volume), in mm. Repairs are
+    reported with a `MeshRepairWarning`; anything unrepairable, or a size that is not a tooth's in
+    millimetres, raises `MeshError` naming the file and the fix.
+    """
+    path = Path(path)
+    where = str(path)
+    if not np.isfinite(scale) or scale <= 0:
+        raise MeshError(where, "scale", f"must be a positive number, got {scale!r}", "pass e.g. scale=1000 for metres")
+    if not path.is_file():
+        raise MeshError(where, None, "file not found", "check the path and the file name")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise MeshError(where, None, f"unsupported mesh format '{path.suffix}'", "convert it to STL, OBJ or PLY")
+    try:
+        # process=False: repairs below are done step by step so each one can be reported.
+        mesh = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for a corrupt file; all mean "unreadable"
+        raise MeshError(where, None, f"cannot be read as a mesh ({type(exc).__name__}: {exc})",
+                        "re-export it as a binary STL") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0 or len(mesh.vertices) == 0:
+        raise MeshError(where, None, "contains no triangles", "re-export the tooth as a closed triangle mesh")
+
+    repaired: list[str] = []
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    if faces.ndim != 2 or faces.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(vertices):
+        raise MeshError(where, "faces", "refer to vertices that do not exist", "re-export the mesh")
+    bad_vertex = ~np.isfinite(vertices).all(axis=1)
+    if bad_vertex.any():
+        keep = ~bad_vertex[faces].any(axis=1)
+        repaired.append(f"dropped {int((~keep).sum())} faces on {int(bad_vertex.sum())} NaN/infinite vertices")
+        faces = faces[keep]
+        if len(faces) == 0:
+            raise MeshError(where, "vertices", "every vertex is NaN or infinite", "re-export the mesh")
+    mesh = trimesh.Trimesh(vertices * scale, faces, process=False)
+    mesh.remove_unreferenced_vertices()
+
+    _check_units(mesh, where, scale)
+
+    # An STL is a triangle soup: merging coincident vertices is how it is read, not a repair.
+    mesh.merge_vertices()
+    keep = mesh.nondegenerate_faces()
+    if not keep.all():
+        repaired.append(f"dropped {int((~keep).sum())} zero-area faces")
+        mesh.update_faces(keep)
+    keep = mesh.unique_faces()
+    if not keep.all():
+        repaired.append(f"dropped {int((~keep).sum())} duplicate faces")
+        mesh.update_faces(keep)
+    mesh.remove_unreferenced_vertices()
+    if len(mesh.faces) < 4:
+        raise MeshError(where, None, "has fewer than 4 valid triangles, so it cannot enclose a volume",
+                        "re-export the tooth as a closed mesh")
+
+    if not mesh.is_watertight:
+        before = len(mesh.faces)
+        trimesh.repair.fill_holes(mesh)  # fills only triangle and quad holes: safe, shape kept
+        if not mesh.is_watertight:
+            raise MeshError(where, None, "is not watertight (it has holes or edges shared by more than two faces)",
+                            "close the mesh in a mesh editor (e.g. MeshLab 'Close Holes') and export it again")
+        repaired.append(f"filled small holes with {len(mesh.faces) - before} faces")
+
+    if not mesh.is_winding_consistent:
+        trimesh.repair.fix_winding(mesh)
+        if not mesh.is_winding_consistent:
+            raise MeshError(where, None, "has inconsistent face winding that cannot be fixed (non-manifold)",
+                            "repair the mesh in a mesh editor and export it again")
+        repaired.append("made face winding consistent")
+    if mesh.volume < 0:
+        mesh.invert()
+        repaired.append("inverted inside-out winding (normals now point outward)")
+    if not mesh.volume > 0:
+        raise MeshError(where, None, "encloses no volume", "re-export the tooth as a closed solid")
+
+    if repaired:
+        warnings.warn(f"{where}: repaired mesh: {'; '.join(repaired)}", MeshRepairWarning, stacklevel=2)
+    return mesh
+
+
+def _check_units(mesh: trimesh.Trimesh, where: str, scale: float) -> None:
+    """Refuse a mesh whose size is not a tooth's in mm, naming the `scale` that would fix it."""
+    diagonal = float(np.linalg.norm(mesh.extents))
+    low, high = TOOTH_DIAGONAL_MM
+    if low <= diagonal <= high:
+        return
+    for factor, unit in _UNIT_GUESSES:
+        if low <= diagonal * factor <= high:
+            fix = f"the file looks like {unit}: pass scale={scale * factor:g}"
+            break
+    else:
+        fix = "check that the file holds one tooth, and pass scale= to convert its units to mm"
+    raise MeshError(where, "size", f"bounding-box diagonal {diagonal:.4g} mm (after scale={scale:g}) is outside "
+                    f"the {low:g}-{high:g} mm of a tooth in millimetres", fix)
+
+
+def tooth_from_mesh(fdi: int, mesh: trimesh.Trimesh, axes: ToothAxes, source: str = "mesh") -> Tooth:
+    """A `Tooth` from a closed mesh already in the arch frame and its axes (arch frame).
+
+    The local frame follows `orthosim.tooth`: +y along `axes.long_axis`, +z the labial direction
+    orthogonalised against it, +x = y cross z, origin at the CEJ estimated by `CEJ_RULE` on the
+    long axis through `axes.point`. The mesh is stored in that frame and `rest_pose` maps it back,
+    so `tooth.world_mesh()` reproduces the input geometry (a rigid map, exact up to rounding).
+    """
+    where = source
+    y = _unit(axes.long_axis, where, "long axis")
+    z = np.asarray(axes.labial, float) - y * (np.asarray(axes.labial, float) @ y)
+    z = _unit(z, where, "labial direction (parallel to the long axis)")
+    x = np.cross(y, z)
+    point = mesh.center_mass if axes.point is None else np.asarray(axes.point, float)
+
+    along = (mesh.vertices - point) @ y
+    dims = dimensions(fdi)
+    cej_level = float(along.max()) - dims.crown_height
+    root_length = cej_level - float(along.min())
+    if root_length < 0.25 * dims.root_length:
+        raise MeshError(where, "root", f"the mesh reaches only {max(root_length, 0.0):.1f} mm below the estimated "
+                        f"CEJ ({dims.crown_height:g} mm below the crown tip); orthosim needs crown and root",
+                        "use a tooth mesh that includes the root (e.g. segmented from CBCT)")
+
+    rest_pose = np.eye(4)
+    rest_pose[:3, 0], rest_pose[:3, 1], rest_pose[:3, 2] = x, y, z
+    rest_pose[:3, 3] = point + cej_level * y
+    local = mesh.copy()
+    inverse = np.eye(4)
+    inverse[:3, :3] = rest_pose[:3, :3].T
+    inverse[:3, 3] = -rest_pose[:3, :3].T @ rest_pose[:3, 3]
+    local.apply_transform(inverse)
+
+    face_part = part_of_faces(local)
+    crown = face_part == 0
+    if not crown.any():
+        raise MeshError(where, "crown", "no face lies above the estimated CEJ", "check the long axis direction")
+    # Surface centre of the crown faces, area weighted so dense triangulation does not bias it.
+    area = local.area_faces[crown]
+    crown_center = (local.triangles_center[crown] * area[:, None]).sum(axis=0) / area.sum()
+    return Tooth(
+        fdi=fdi,
+        mesh=local,
+        face_part=face_part,
+        crown_center=crown_center,
+        apex=np.array([0.0, -root_length, 0.0]),
+        rest_pose=rest_pose,
+        source=source,
+    )
+
+
+def estimate_axes(fdi: int, mesh: trimesh.Trimesh, arch_center: np.ndarray, where: str) -> ToothAxes:
+    """Axes of a tooth mesh given in the arch frame, from its shape alone.
+
+    Long axis: the longest principal axis of the surface (area-weighted PCA), pointed toward the
+    occlusal plane (-y for upper teeth, +y for lower). Labial: the horizontal direction from
+    `arch_center` (3,) to the tooth's centroid. The axis passes through the volume centroid.
+    """
+    centers = mesh.triangles_center
+    weights = mesh.area_faces / mesh.area
+    mean = weights @ centers
+    d = centers - mean
+    cov = (d * weights[:, None]).T @ d
+    _, vecs = np.linalg.eigh(cov)
+    long_axis = vecs[:, -1]
+    toward_occlusal = -1.0 if fdi_mod.arch_of(fdi) is Arch.UPPER else 1.0
+    if long_axis[1] * toward_occlusal < 0:
+        long_axis = -long_axis
+    tilt = np.degrees(np.arccos(min(1.0, abs(long_axis[1]))))
+    if tilt > MAX_PCA_TILT_DEG:
+        raise MeshError(where, "orientation", f"the tooth's long axis is {tilt:.0f} degrees from the arch frame's "
+                        "vertical (y) axis, so the mesh does not seem to be in the arch frame",
+                        "transform the meshes into the arch frame (y up, occlusal plane y=0, +z anterior) "
+                        "or pass axes= for each tooth")
+    center = mesh.center_mass
+    labial = center - np.asarray(arch_center, float)
+    labial[1] = 0.0
+    if np.linalg.norm(labial) < 1e-6:
+        raise MeshError(where, "position", "the tooth sits at the arch centre, so its labial side is unknown",
+                        "pass axes= for this tooth")
+    return ToothAxes(long_axis=long_axis, labial=labial, point=center)
+
+
+def load_mesh_folder(
+    folder: str | Path,
+    mapping: dict[str, int] | None = None,
+    *,
+    scale: float = 1.0,
+    axes: dict[int, ToothAxes] | None = None,
+    description: str = "",
+) -> Dentition:
+    """A `Dentition` from a folder of per-tooth meshes that are ALREADY IN THE ARCH FRAME (mm).
+
+    `mapping`: file name relative to `folder` -> FDI number. Without it every STL/OBJ/PLY file in
+    the folder is used and its FDI number is the last number in its name (`11.stl`,
+    `tooth_21.obj`, `UL6_26.ply`). `axes`: optional FDI -> `ToothAxes` (arch frame); teeth without
+    one get axes from `estimate_axes` (PCA long axis toward the occlusal plane, labial away from
+    the centroid of their arch). `scale` multiplies every mesh (e.g. 1000 for metres).
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise MeshError(folder, None, "folder not found", "check the path")
+    if mapping is None:
+        mapping = _mapping_from_names(folder)
+    if not mapping:
+        raise MeshError(folder, None, "holds no STL, OBJ or PLY tooth meshes", "check the folder")
+    files: dict[int, Path] = {}
+    for name, number in mapping.items():
+        if not fdi_mod.is_fdi(number):
+            raise MeshError(folder, f"mapping[{name!r}]", f"{number!r} is not an FDI tooth number",
+                            "use two-digit FDI numbers 11-18, 21-28, 31-38, 41-48")
+        if number in files:
+            raise MeshError(folder, f"mapping[{name!r}]", f"FDI {number} is also given to {files[number].name}",
+                            "map each tooth number to one file")
+        files[number] = folder / name
+
+    meshes = {n: load_tooth_mesh(p, scale=scale) for n, p in files.items()}
+    axes = dict(axes or {})
+    given = set(axes)
+    for arch in (Arch.UPPER, Arch.LOWER):
+        members = [n for n in meshes if fdi_mod.arch_of(n) is arch]
+        # The arch centroid is a good inside point once the arch has a few teeth; with fewer the
+        # frame origin (mid-arch by the arch frame's definition) is the only reference there is.
+        if len(members) >= 3:
+            arch_center = np.mean([meshes[n].center_mass for n in members], axis=0)
+        else:
+            arch_center = np.zeros(3)
+        for n in members:
+            if n not in axes:
+                axes[n] = estimate_axes(n, meshes[n], arch_center, str(files[n]))
+    teeth = {n: tooth_from_mesh(n, meshes[n], axes[n], source=str(files[n])) for n in meshes}
+    info = {
+        "source": str(folder),
+        "files": {n: str(p) for n, p in files.items()},
+        "scale": scale,
+        "frame": "input meshes taken as already in the arch frame",
+        "axes_estimated": sorted(n for n in teeth if n not in given),
+        "cej_rule": CEJ_RULE,
+    }
+    return Dentition(teeth, description or f"meshes from {folder}", info)
+
+
+def _mapping_from_names(folder: Path) -> dict[str, int]:
+    mapping: dict[str, int] = {}
+    for path in sorted(folder.iterdir()):
+        if path.suffix.lower() not in MESH_SUFFIXES or not path.is_file():
+            continue
+        numbers = re.findall(r"\d+", path.stem)
+        number = int(numbers[-1]) if numbers else None
+        if number is None or not fdi_mod.is_fdi(number):
+            raise MeshError(path, None, "the file name holds no FDI tooth number",
+                            "rename it (e.g. tooth_11.stl) or pass mapping={file name: FDI number}")
+        mapping[path.name] = number
+    return mapping
+
+
+def _unit(v: np.ndarray, where: str, what: str) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    n = float(np.linalg.norm(v))
+    if not np.isfinite(n) or n < 1e-9:
+        raise MeshError(where, "axes", f"the {what} has zero length", "give a non-zero direction")
+    return v / n
+
+
+def load_open_full_jaw(folder: str | Path) -> Dentition:
+    """Convenience alias of `orthosim.openfulljaw.load_open_full_jaw` (see there)."""
+    from .openfulljaw import load_open_full_jaw as load
+
+    return load(folder)
