@@ -1,0 +1,297 @@
+"""Loading tooth meshes: real CBCT teeth land in the arch frame rigidly and in order; broken files are refused or repaired loudly."""
+
+from __future__ import annotations
+
+import itertools
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from orthosim.errors import MeshError
+from orthosim.fdi import Arch
+from orthosim.meshload import MeshRepairWarning, ToothAxes, load_mesh_folder, load_tooth_mesh
+from orthosim.openfulljaw import load_open_full_jaw
+from orthosim.pose import is_rigid
+
+MAXILLA = Path("/work/shared/data/open-full-jaw-patient26/maxilla")
+UPPER_PRESENT = [18, 17, 16, 15, 14, 13, 12, 11, 21, 22, 23, 24, 25, 26, 27]  # Universal 1-15; 28 absent
+
+
+# ---------------------------------------------------------------- real teeth (Open-Full-Jaw, patient 26)
+
+
+@pytest.fixture(scope="module")
+def jaw():
+    if not (MAXILLA / "teeth_axes_maxilla.json").is_file():
+        pytest.skip(f"Open-Full-Jaw data not present at {MAXILLA}")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        dentition = load_open_full_jaw(MAXILLA)
+    raw = {}  # FDI -> mesh as stored in the file, scan frame
+    for universal, fdi in dentition.info["universal_to_fdi"].items():
+        raw[fdi] = trimesh.load(MAXILLA / f"tooth_{universal}.stl", force="mesh")
+    return dentition, raw, [str(w.message) for w in caught]
+
+
+def test_real_teeth_all_load_without_repairs(jaw):
+    dentition, _, messages = jaw
+    assert dentition.fdis == UPPER_PRESENT
+    assert messages == []  # the dataset's meshes are clean: nothing to repair, no axis flipped
+
+
+def test_scan_to_arch_is_one_rigid_map(jaw):
+    dentition, raw, _ = jaw
+    T = dentition.info["scan_to_arch"]
+    assert is_rigid(T)  # rotation with det +1: no scaling, no mirroring
+    scan = {n: raw[n].center_mass for n in UPPER_PRESENT}
+    arch = {n: dentition.teeth[n].world_mesh().center_mass for n in UPPER_PRESENT}
+    for n in UPPER_PRESENT:
+        np.testing.assert_allclose(T[:3, :3] @ scan[n] + T[:3, 3], arch[n], atol=1e-6)
+    for a, b in itertools.combinations(UPPER_PRESENT, 2):
+        d_scan = np.linalg.norm(scan[a] - scan[b])
+        d_arch = np.linalg.norm(arch[a] - arch[b])
+        assert abs(d_scan - d_arch) < 1e-6, (a, b)
+
+
+def test_world_mesh_reproduces_the_file_geometry(jaw):
+    dentition, raw, _ = jaw
+    T = dentition.info["scan_to_arch"]
+    for n in UPPER_PRESENT:
+        moved = raw[n].vertices @ T[:3, :3].T + T[:3, 3]
+        world = dentition.teeth[n].world_mesh()
+        np.testing.assert_allclose(world.bounds, [moved.min(axis=0), moved.max(axis=0)], atol=1e-9)
+        assert world.volume == pytest.approx(raw[n].volume, rel=1e-9)
+
+
+def test_teeth_run_from_patients_right_to_left(jaw):
+    dentition, _, _ = jaw
+    centres = dentition.crown_centers()
+    xs = [centres[n][0] for n in dentition.arch(Arch.UPPER)]
+    assert dentition.arch(Arch.UPPER) == UPPER_PRESENT
+    assert all(a < b for a, b in zip(xs, xs[1:])), xs
+    assert centres[17][0] < 0 < centres[27][0]
+    assert centres[11][2] > centres[16][2]  # incisors anterior (+z) of molars
+
+
+def test_crown_centres_lie_in_the_occlusal_plane_orientation(jaw):
+    dentition, _, _ = jaw
+    C = np.array(list(dentition.crown_centers().values()))
+    _, _, vt = np.linalg.svd(C - C.mean(axis=0))
+    tilt = np.degrees(np.arccos(abs(vt[2][1])))
+    assert tilt < 5.0
+    # Upper crowns hang just above the occlusal plane y = 0 and every tooth touches it within a few mm.
+    assert np.all(C[:, 1] > 0) and np.all(C[:, 1] < 10)
+
+
+def test_upper_crowns_point_down(jaw):
+    dentition, _, _ = jaw
+    # Measured: 7.9-26.9 degrees; the upper incisors are proclined (~23-26 degrees) and the third
+    # molar 18 tips (~27 degrees), as real teeth do, so 30 degrees bounds "pointing down".
+    for n in UPPER_PRESENT:
+        long_axis = dentition.teeth[n].rest_pose[:3, :3] @ np.array([0.0, 1.0, 0.0])
+        angle = np.degrees(np.arccos(-long_axis[1]))
+        assert angle < 30.0, (n, angle)
+
+
+def test_local_frames_are_anatomical(jaw):
+    dentition, _, _ = jaw
+    centres = dentition.crown_centers()
+    arch_centre = np.mean(list(centres.values()), axis=0)
+    for n in UPPER_PRESENT:
+        tooth = dentition.teeth[n]
+        assert is_rigid(tooth.rest_pose)
+        R = tooth.rest_pose[:3, :3]
+        outward = tooth.to_world(tooth.crown_center) - arch_centre
+        outward[1] = 0
+        assert (R @ tooth.labial) @ outward > 0, n  # labial faces away from the arch centre
+        mesial_neighbour = n - 1 if n % 10 > 1 else {11: 21, 21: 11}[n]
+        assert (R @ tooth.mesial) @ (centres[mesial_neighbour] - centres[n]) > 0, n
+        assert tooth.crown_center[1] > 0  # crown coronal of the CEJ
+        assert 7.0 < tooth.root_length < 20.0, (n, tooth.root_length)
+        assert set(np.unique(tooth.face_part)) == {0, 1}
+
+
+def test_every_real_mesh_is_closed_with_positive_volume(jaw):
+    dentition, _, _ = jaw
+    for n in UPPER_PRESENT:
+        mesh = dentition.teeth[n].mesh
+        assert mesh.is_watertight and mesh.is_winding_consistent, n
+        assert mesh.volume > 0, n
+
+
+def test_info_records_how_it_was_built(jaw):
+    dentition, _, _ = jaw
+    info = dentition.info
+    assert info["source"] == str(MAXILLA)
+    assert info["scan_to_arch"].shape == (4, 4)
+    assert "Wheeler" in info["cej_rule"]
+    for n in UPPER_PRESENT:
+        assert dentition.teeth[n].source.endswith(".stl")
+
+
+# ---------------------------------------------------------------- broken and synthetic meshes
+
+
+def _tooth_shape(length: float = 23.0, radius: float = 4.0) -> trimesh.Trimesh:
+    """A capsule standing along +y, about the size of a tooth (mm)."""
+    mesh = trimesh.creation.capsule(height=length - 2 * radius, radius=radius, count=[16, 16])
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(-np.pi / 2, [1, 0, 0]))  # z -> y
+    return mesh
+
+
+def test_missing_file_names_the_file(tmp_path):
+    with pytest.raises(MeshError, match="nope.stl.*not found"):
+        load_tooth_mesh(tmp_path / "nope.stl")
+
+
+@pytest.mark.parametrize("content", [b"this is not a mesh\n", bytes(range(256)) * 3])
+def test_garbage_file_is_refused(tmp_path, content):
+    path = tmp_path / "garbage.stl"
+    path.write_bytes(content)
+    with pytest.raises(MeshError, match="garbage.stl"):
+        load_tooth_mesh(path)
+
+
+def test_unknown_format_is_refused(tmp_path):
+    path = tmp_path / "tooth.xyz"
+    path.write_text("1 2 3\n")
+    with pytest.raises(MeshError, match="tooth.xyz.*STL"):
+        load_tooth_mesh(path)
+
+
+def test_mesh_with_a_hole_is_refused(tmp_path):
+    mesh = _tooth_shape()
+    keep = mesh.triangles_center[:, 1] < 9.0  # cut the top off: a big hole fill_holes must not guess
+    mesh.update_faces(keep)
+    path = tmp_path / "holed.stl"
+    mesh.export(path)
+    with pytest.raises(MeshError, match="holed.stl.*not watertight"):
+        load_tooth_mesh(path)
+
+
+def test_single_missing_triangle_is_filled_with_a_warning(tmp_path):
+    mesh = _tooth_shape()
+    mesh.update_faces(np.arange(len(mesh.faces)) != 5)
+    path = tmp_path / "pinhole.ply"
+    mesh.export(path)
+    with pytest.warns(MeshRepairWarning, match="pinhole.ply.*filled"):
+        loaded = load_tooth_mesh(path)
+    assert loaded.is_watertight and loaded.volume == pytest.approx(_tooth_shape().volume, rel=1e-3)
+
+
+@pytest.mark.parametrize("suffix", [".stl", ".obj", ".ply"])
+def test_inverted_winding_is_repaired_with_a_warning(tmp_path, suffix):
+    mesh = _tooth_shape()
+    mesh.invert()
+    path = tmp_path / f"inside_out{suffix}"
+    mesh.export(path)
+    with pytest.warns(MeshRepairWarning, match=f"inside_out{suffix}.*invert"):
+        loaded = load_tooth_mesh(path)
+    assert loaded.volume == pytest.approx(_tooth_shape().volume, rel=1e-6)
+    assert loaded.volume > 0
+
+
+def test_degenerate_and_duplicate_faces_are_dropped_with_a_warning(tmp_path):
+    mesh = _tooth_shape()
+    v = mesh.vertices
+    faces = np.vstack([mesh.faces, mesh.faces[:3], [[0, 0, 1]]])  # 3 duplicates, 1 zero-area
+    path = tmp_path / "messy.ply"
+    trimesh.Trimesh(v, faces, process=False).export(path)
+    with pytest.warns(MeshRepairWarning, match="messy.ply.*zero-area.*duplicate"):
+        loaded = load_tooth_mesh(path)
+    assert len(loaded.faces) == len(mesh.faces) and loaded.is_watertight
+
+
+def test_clean_mesh_loads_silently(tmp_path):
+    path = tmp_path / "clean.stl"
+    _tooth_shape().export(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        loaded = load_tooth_mesh(path)
+    assert loaded.is_watertight and loaded.volume > 0
+
+
+def test_tooth_in_metres_is_refused_with_the_scale_fix(tmp_path):
+    mesh = _tooth_shape()
+    mesh.apply_scale(0.001)
+    path = tmp_path / "metres.stl"
+    mesh.export(path)
+    with pytest.raises(MeshError, match="metres.stl.*scale=1000"):
+        load_tooth_mesh(path)
+    assert load_tooth_mesh(path, scale=1000).volume == pytest.approx(_tooth_shape().volume, rel=1e-6)
+
+
+def test_tooth_in_micrometres_is_refused_with_the_scale_fix(tmp_path):
+    mesh = _tooth_shape()
+    mesh.apply_scale(1000.0)
+    path = tmp_path / "um.stl"
+    mesh.export(path)
+    with pytest.raises(MeshError, match="um.stl.*micrometres.*scale=0.001"):
+        load_tooth_mesh(path)
+
+
+def _arch_folder(tmp_path: Path, tilt_deg: float = 10.0) -> dict[int, trimesh.Trimesh]:
+    """Four upper 'teeth' on an arch in the arch frame, crowns down near y = 0, roots tipped outward."""
+    placed = {}
+    for fdi, angle in ((13, -50.0), (11, -8.0), (21, 8.0), (23, 50.0)):
+        mesh = _tooth_shape()
+        mesh.apply_transform(trimesh.transformations.rotation_matrix(np.pi, [0, 0, 1]))  # crown down
+        mesh.apply_translation([0, 11.5, 0])  # crown tip at y = 0
+        a = np.radians(angle)
+        outward = np.array([np.sin(a), 0.0, np.cos(a)])
+        tip_axis = np.cross([0.0, 1.0, 0.0], outward)
+        mesh.apply_transform(trimesh.transformations.rotation_matrix(np.radians(tilt_deg), tip_axis))
+        mesh.apply_translation(25.0 * outward - [0, 0, 10.0])
+        mesh.export(tmp_path / f"tooth_{fdi}.stl")
+        placed[fdi] = mesh
+    return placed
+
+
+def test_folder_in_arch_frame_gets_estimated_frames_and_keeps_geometry(tmp_path):
+    placed = _arch_folder(tmp_path)
+    dentition = load_mesh_folder(tmp_path)
+    assert dentition.fdis == [13, 11, 21, 23]
+    assert dentition.info["axes_estimated"] == [11, 13, 21, 23]
+    for n, mesh in placed.items():
+        tooth = dentition.teeth[n]
+        world = tooth.world_mesh()
+        np.testing.assert_allclose(np.sort(world.vertices, axis=0), np.sort(mesh.vertices, axis=0), atol=1e-9)
+        R = tooth.rest_pose[:3, :3]
+        long_axis = R @ tooth.long_axis
+        assert np.degrees(np.arccos(-long_axis[1])) == pytest.approx(10.0, abs=1.0)  # the 10 degree tip
+        labial = R @ tooth.labial
+        assert labial @ np.array([mesh.center_mass[0], 0, mesh.center_mass[2] + 10.0]) > 0
+        neighbour = {13: 11, 11: 21, 21: 11, 23: 21}[n]
+        assert (R @ tooth.mesial) @ (placed[neighbour].center_mass - mesh.center_mass) > 0
+        # CEJ one Wheeler crown height above the crown tip; the capsule is 23 mm long.
+        assert tooth.root_length + {11: 10.5, 21: 10.5, 13: 10.0, 23: 10.0}[n] == pytest.approx(23.0, abs=1e-6)
+
+
+def test_folder_mapping_and_given_axes(tmp_path):
+    placed = _arch_folder(tmp_path, tilt_deg=0.0)
+    axes = {11: ToothAxes(long_axis=np.array([0.0, -1.0, 0.0]), labial=np.array([0.0, 0.0, 1.0]))}
+    dentition = load_mesh_folder(tmp_path, {"tooth_11.stl": 11, "tooth_21.stl": 21}, axes=axes)
+    assert dentition.fdis == [11, 21]
+    np.testing.assert_allclose(dentition.teeth[11].rest_pose[:3, :3],
+                               np.diag([-1.0, -1.0, 1.0]), atol=1e-12)
+    assert dentition.teeth[11].world_mesh().volume == pytest.approx(placed[11].volume)
+
+
+def test_folder_with_bad_names_or_numbers_is_refused(tmp_path):
+    _tooth_shape().export(tmp_path / "molar.stl")
+    with pytest.raises(MeshError, match="molar.stl.*mapping"):
+        load_mesh_folder(tmp_path)
+    with pytest.raises(MeshError, match="19 is not an FDI"):
+        load_mesh_folder(tmp_path, {"molar.stl": 19})
+
+
+def test_folder_not_in_arch_frame_is_refused(tmp_path):
+    mesh = _tooth_shape()
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [0, 0, 1]))  # lying flat
+    mesh.apply_translation([0, 5, 20])
+    mesh.export(tmp_path / "11.stl")
+    with pytest.raises(MeshError, match="11.stl.*arch frame"):
+        load_mesh_folder(tmp_path)
