@@ -1,0 +1,24 @@
+"""Collision detection between teeth: the paper's three detectors and the exact mesh reference.
+
+    model = CollisionModel.from_dentition(dentition)          # built once: trees, circles, meshes
+    result = detect_step(model, poses_start, poses_end, detector="continuous")
+
+Modules: `contract` (request and result types), `model` (what never changes), `broadphase`
+(which pairs to test), `circles` (detector 1), `discrete` (detector 2), `continuous` (detector 3),
+`descent` (the shared vectorised tree descent), `time_of_contact` (Eq. 2 and step bounds),
+`motion` (pose interpolation in a step), `exact` (python-fcl reference), `detect` (the entry
+point), `bench` (timings), `validate` (accuracy studies).
+"""
+
+from .broadphase import arch_neighbour_pairs, candidate_pairs, facing_pairs, sweep_and_prune
+from .contract import DETECTORS, CollisionError, CollisionRequest, PairResult, StepResult
+from .detect import default_pairs, detect_step
+from .model import Body, CollisionModel
+from .motion import interpolate_pose
+from .time_of_contact import first_time_of_contact
+
+__all__ = [
+    "Body", "CollisionError", "CollisionModel", "CollisionRequest", "DETECTORS", "PairResult", "StepResult",
+    "arch_neighbour_pairs", "candidate_pairs", "default_pairs", "detect_step", "facing_pairs",
+    "first_time_of_contact", "interpolate_pose", "sweep_and_prune",
+]

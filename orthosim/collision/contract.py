@@ -1,0 +1,141 @@
+"""The one contract every detector honours: a request says what is wanted, a result says what was found.
+
+Modelled on FCL's CollisionRequest / CollisionResult. The simulator and the renderer read a
+`StepResult` and never need to know which detector produced it: bounding circles, discrete sphere
+trees, continuous sphere trees or the exact mesh test all fill the same fields (a detector that
+has no leaf spheres, such as circles or the exact test, leaves the leaf arrays empty).
+
+Units: millimetres for positions and radii, arch frame for world-space arrays; time is the
+fraction of the step in [0, 1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import OrthosimError
+
+DETECTORS = ("circles", "discrete", "continuous", "exact")
+
+
+class CollisionError(OrthosimError):
+    """A collision query asks for something the model cannot answer (unknown detector, missing pose)."""
+
+
+@dataclass(frozen=True)
+class CollisionRequest:
+    """What a caller wants from one whole-arch query.
+
+    all_leaf_pairs: True collects every overlapping leaf pair (what the renderer highlights);
+        False stops each tooth pair at its first overlapping leaf pair (enough to say "touching").
+    refine_time_of_contact: continuous detector only. False returns the sphere-tree time of first
+        contact (the paper's Eq. 2 at leaf spheres, conservative: never later than the meshes' own).
+        True then advances it on the exact meshes (conservative advancement with exact distances,
+        see `continuous.refine_time_of_contact`) to within `contact_tolerance_mm` of travel.
+    contact_tolerance_mm: travel tolerance (mm) of the refined time of first contact.
+    """
+
+    all_leaf_pairs: bool = True
+    refine_time_of_contact: bool = False
+    contact_tolerance_mm: float = 0.05
+
+
+@dataclass(frozen=True, eq=False)
+class PairResult:
+    """What one detector found for one candidate pair of teeth (FDI `a`, `b`).
+
+    touching: whether the detector reports contact (continuous: at some time in [0, 1)).
+    leaf_pairs: (m, 2) int64 leaf indices (leaf level of tooth a's tree, of tooth b's tree).
+    centers_a, centers_b: (m, 3) float64 mm, arch frame: the overlapping leaves' centres at the
+        reported time (the end pose for discrete queries, the time of first contact for continuous).
+    radii_a, radii_b: (m,) float64 mm.
+    time_of_first_contact: continuous detector only, in [0, 1); None when no contact in the step.
+    distance: exact detector only: the meshes' distance (mm), 0 when they intersect.
+    """
+
+    a: int
+    b: int
+    touching: bool
+    leaf_pairs: np.ndarray
+    centers_a: np.ndarray
+    centers_b: np.ndarray
+    radii_a: np.ndarray
+    radii_b: np.ndarray
+    time_of_first_contact: float | None = None
+    distance: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class StepResult:
+    """Every candidate pair of one step, with the leaf arrays concatenated for drawing.
+
+    pairs: (p, 2) int64 FDI numbers of the tested pairs, in the order given.
+    touching: (p,) bool per pair.
+    time_of_first_contact: (p,) float64 per pair, NaN where no contact (continuous detector;
+        NaN everywhere for discrete detectors).
+    pair_of_leaf: (m,) int64 index into `pairs` of each overlapping leaf pair.
+    leaf_pairs, centers_a, centers_b, radii_a, radii_b: as in `PairResult`, concatenated over pairs.
+    detector: which detector produced this ("circles", "discrete", "continuous", "exact").
+    distance: (p,) float64 mm, exact detector only (NaN otherwise).
+    """
+
+    detector: str
+    pairs: np.ndarray
+    touching: np.ndarray
+    time_of_first_contact: np.ndarray
+    pair_of_leaf: np.ndarray
+    leaf_pairs: np.ndarray
+    centers_a: np.ndarray
+    centers_b: np.ndarray
+    radii_a: np.ndarray
+    radii_b: np.ndarray
+    distance: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def any_touching(self) -> bool:
+        return bool(self.touching.any())
+
+    @property
+    def first_time_of_contact(self) -> float | None:
+        """Least time of first contact over all pairs of the step, None when nothing touches."""
+        t = self.time_of_first_contact
+        if t.size == 0 or np.all(np.isnan(t)):
+            return None
+        return float(np.nanmin(t))
+
+    def touching_pairs(self) -> list[tuple[int, int]]:
+        return [(int(a), int(b)) for (a, b), hit in zip(self.pairs, self.touching) if hit]
+
+    def pair(self, i: int) -> PairResult:
+        """The result of pair i alone."""
+        sel = self.pair_of_leaf == i
+        toc = self.time_of_first_contact[i] if len(self.time_of_first_contact) else np.nan
+        dist = self.distance[i] if len(self.distance) else np.nan
+        return PairResult(
+            a=int(self.pairs[i, 0]),
+            b=int(self.pairs[i, 1]),
+            touching=bool(self.touching[i]),
+            leaf_pairs=self.leaf_pairs[sel],
+            centers_a=self.centers_a[sel],
+            centers_b=self.centers_b[sel],
+            radii_a=self.radii_a[sel],
+            radii_b=self.radii_b[sel],
+            time_of_first_contact=None if np.isnan(toc) else float(toc),
+            distance=None if np.isnan(dist) else float(dist),
+        )
+
+    def by_pair(self) -> dict[tuple[int, int], PairResult]:
+        return {(int(a), int(b)): self.pair(i) for i, (a, b) in enumerate(self.pairs)}
+
+
+def empty_leaves() -> dict[str, np.ndarray]:
+    return dict(
+        pair_of_leaf=np.zeros(0, np.int64),
+        leaf_pairs=np.zeros((0, 2), np.int64),
+        centers_a=np.zeros((0, 3)),
+        centers_b=np.zeros((0, 3)),
+        radii_a=np.zeros(0),
+        radii_b=np.zeros(0),
+    )

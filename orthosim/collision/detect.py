@@ -1,0 +1,130 @@
+"""One entry point for every detector: a whole-arch step in, a `StepResult` out.
+
+The simulator and the renderer call `detect_step`; which detector runs is a parameter. Discrete
+detectors (circles, discrete, exact) test the poses at the end of the step (`poses_end`, or
+`poses_start` when there is no end); the continuous detector sweeps from `poses_start` to
+`poses_end` with the motion of `orthosim.collision.motion`.
+"""
+
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from .. import fdi as fdi_mod
+from . import exact
+from .broadphase import candidate_pairs, sweep_and_prune
+from .circles import bounding_circles, circles_overlap
+from .continuous import refine_time_of_contact, swept_leaves
+from .contract import DETECTORS, CollisionError, CollisionRequest, StepResult, empty_leaves
+from .discrete import overlapping_leaves
+from .model import CollisionModel
+from .motion import interpolate_poses
+
+
+def default_pairs(model: CollisionModel, poses: np.ndarray | None = None, absent: Sequence[int] = ()) -> list[tuple[int, int]]:
+    """The broad phase: arch neighbours and facing teeth when every body is an FDI tooth, else a
+    sweep and prune over the bodies' root spheres at `poses` (rest poses by default)."""
+    keys = model.keys
+    if all(fdi_mod.is_fdi(k) for k in keys):
+        return candidate_pairs(keys, absent)
+    P = np.stack([b.rest_pose for b in model.bodies]) if poses is None else poses
+    c = np.einsum("nij,nj->ni", P[:, :3, :3], model.centers[0]) + P[:, :3, 3]
+    idx = sweep_and_prune(c, model.radii[0])
+    return [(keys[i], keys[j]) for i, j in idx]
+
+
+def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], poses_end: Mapping[int, np.ndarray] | None = None,
+                pairs: Sequence[tuple[int, int]] | None = None, detector: str = "discrete",
+                request: CollisionRequest = CollisionRequest()) -> StepResult:
+    """Test every candidate pair of one step with one detector.
+
+    poses_start, poses_end: FDI -> (4, 4) local -> arch frame (mm); teeth not given keep their rest pose.
+    pairs: (FDI a, FDI b) to test; the broad phase (`default_pairs`) when None.
+    detector: "circles", "discrete", "continuous" or "exact".
+    """
+    if detector not in DETECTORS:
+        raise CollisionError(None, "detector", f"unknown detector {detector!r}", f"use one of {', '.join(DETECTORS)}")
+    P0 = model.pose_array(poses_start)
+    P1 = model.pose_array(poses_end) if poses_end is not None else P0
+    if pairs is None:
+        pairs = default_pairs(model, P1)
+    pairs_arr = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    pair_idx = model.pair_indices(pairs_arr)
+    p = len(pair_idx)
+    nan = np.full(p, np.nan)
+    if detector == "circles":
+        c, r = bounding_circles(model, P1)
+        return StepResult("circles", pairs_arr, circles_overlap(c, r, pair_idx), nan, **empty_leaves())
+    if detector == "exact":
+        return _exact_step(model, P1, pairs_arr, pair_idx, request)
+    first_only = not request.all_leaf_pairs
+    if detector == "discrete":
+        pair, la, lb = overlapping_leaves(model, P1, pair_idx, first_only)
+        touching = np.zeros(p, bool)
+        touching[pair] = True
+        return StepResult("discrete", pairs_arr, touching, nan, **_leaf_arrays(model, pair_idx, pair, la, lb, P1, P1))
+    # continuous
+    pair, la, lb, t, leave = swept_leaves(model, P0, P1, pair_idx, first_only)
+    toc = nan.copy()
+    if len(pair):
+        order = np.lexsort((t, pair))
+        first = order[np.unique(pair[order], return_index=True)[1]]
+        toc[pair[first]] = t[first]
+    if request.refine_time_of_contact:
+        for i in np.flatnonzero(~np.isnan(toc)):
+            a, b = pair_idx[i]
+            toc[i] = np.nan if (r := refine_time_of_contact(
+                model, a, b, P0[a], P1[a], P0[b], P1[b], toc[i], request.contact_tolerance_mm)) is None else r
+    # the contact regions drawn are the leaf pairs overlapping when their pair first touches
+    at = toc[pair]
+    live = (t <= at) & (at <= leave)
+    pair, la, lb = pair[live], la[live], lb[live]
+    touching = ~np.isnan(toc)
+    # leaf centres drawn where each pair first touches
+    ta = interpolate_poses(P0[pair_idx[:, 0]], P1[pair_idx[:, 0]], np.nan_to_num(toc))
+    tb = interpolate_poses(P0[pair_idx[:, 1]], P1[pair_idx[:, 1]], np.nan_to_num(toc))
+    return StepResult("continuous", pairs_arr, touching, toc, **_leaf_arrays(model, pair_idx, pair, la, lb, ta, tb, per_pair=True))
+
+
+def _leaf_arrays(model, pair_idx, pair, la, lb, Pa, Pb, per_pair=False):
+    ia, ib = pair_idx[pair, 0], pair_idx[pair, 1]
+    A = Pa[pair] if per_pair else Pa[ia]
+    B = Pb[pair] if per_pair else Pb[ib]
+    ca = np.einsum("mij,mj->mi", A[:, :3, :3], model.centers[-1][la]) + A[:, :3, 3]
+    cb = np.einsum("mij,mj->mi", B[:, :3, :3], model.centers[-1][lb]) + B[:, :3, 3]
+    return dict(
+        pair_of_leaf=pair.astype(np.int64),
+        leaf_pairs=np.stack([model.leaf_local(ia, la), model.leaf_local(ib, lb)], axis=1).astype(np.int64).reshape(-1, 2),
+        centers_a=ca.reshape(-1, 3),
+        centers_b=cb.reshape(-1, 3),
+        radii_a=model.radii[-1][la],
+        radii_b=model.radii[-1][lb],
+    )
+
+
+def _exact_step(model, P, pairs_arr, pair_idx, request):
+    """FCL on every pair: touching, distance; with all_leaf_pairs, contact points as zero-radius
+    'leaves' and the intersecting face index pairs in `leaf_pairs`."""
+    p = len(pair_idx)
+    touching = np.zeros(p, bool)
+    dist = np.zeros(p)
+    pts, faces, owner = [], [], []
+    for i, (a, b) in enumerate(pair_idx):
+        oa, ob = model.fcl_object(a), model.fcl_object(b)
+        exact.set_pose(oa, P[a])
+        exact.set_pose(ob, P[b])
+        hit, contacts = exact.collide(oa, ob, all_contacts=request.all_leaf_pairs)
+        touching[i] = hit
+        dist[i] = 0.0 if hit else exact.distance(oa, ob)
+        if contacts is not None and len(contacts[0]):
+            pts.append(contacts[0])
+            faces.append(contacts[1])
+            owner.append(np.full(len(contacts[0]), i))
+    leaves = empty_leaves()
+    if pts:
+        c = np.concatenate(pts)
+        leaves.update(pair_of_leaf=np.concatenate(owner).astype(np.int64), leaf_pairs=np.concatenate(faces),
+                      centers_a=c, centers_b=c.copy(), radii_a=np.zeros(len(c)), radii_b=np.zeros(len(c)))
+    return StepResult("exact", pairs_arr, touching, np.full(p, np.nan), distance=dist, **leaves)

@@ -1,0 +1,77 @@
+"""How a tooth moves between the two ends of a step, and how far that motion strays from a straight line.
+
+The continuous detector and its exact ground truth must agree on the motion between the poses at
+t = 0 and t = 1, because two different interpolations of the same end poses sweep different
+volumes. orthosim uses, for every tooth:
+
+    translation of the local origin: linear, p(t) = p0 + t (p1 - p0)
+    rotation: constant angular velocity about the local origin (the CEJ centre on the long axis),
+        R(t) = exp(t log(R1 R0^T)) R0, the shortest rotation (angle in [0, pi]) scaled by t.
+
+A point x of the tooth (local frame) is at X(t) = R(t) x + p(t). The paper's continuous test
+interpolates sphere centres along the chord X(0) -> X(1); the true path leaves the chord when the
+tooth rotates. With v = x (its distance from the local origin |x| = rho) the deviation
+d(t) = X(t) - [(1 - t) X(0) + t X(1)] vanishes at both ends and |d''(t)| = theta^2 rho_perp <=
+theta^2 rho, so |d(t)| <= theta^2 rho t (1 - t) / 2 <= theta^2 rho / 8 (and always <= 2 rho).
+Inflating a sphere of centre x by that bound makes the chord test conservative.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+
+def rotation_vector(T0: np.ndarray, T1: np.ndarray) -> np.ndarray:
+    """(..., 3) rotation vector (radians, arch frame) of R1 R0^T, angle in [0, pi]. T: (..., 4, 4)."""
+    T0 = np.asarray(T0, float)
+    T1 = np.asarray(T1, float)
+    R = np.einsum("...ij,...kj->...ik", T1[..., :3, :3], T0[..., :3, :3])
+    shape = R.shape[:-2]
+    return Rotation.from_matrix(R.reshape(-1, 3, 3)).as_rotvec().reshape(*shape, 3)
+
+
+def rotation_angle(T0: np.ndarray, T1: np.ndarray) -> np.ndarray:
+    """(...,) radians turned between the two poses, in [0, pi]."""
+    return np.linalg.norm(rotation_vector(T0, T1), axis=-1)
+
+
+def interpolate_pose(T0: np.ndarray, T1: np.ndarray, t: float | np.ndarray) -> np.ndarray:
+    """Pose(s) at time t in [0, 1] of the step from T0 to T1 (both (4, 4)); returns (4, 4) or (n, 4, 4)."""
+    T0 = np.asarray(T0, float)
+    T1 = np.asarray(T1, float)
+    ts = np.atleast_1d(np.asarray(t, float))
+    w = rotation_vector(T0, T1)
+    R = Rotation.from_rotvec(ts[:, None] * w[None, :]).as_matrix() @ T0[:3, :3]
+    out = np.tile(np.eye(4), (len(ts), 1, 1))
+    out[:, :3, :3] = R
+    out[:, :3, 3] = T0[:3, 3] + ts[:, None] * (T1[:3, 3] - T0[:3, 3])
+    return out[0] if np.ndim(t) == 0 else out
+
+
+def chord_deviation_bound(theta: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    """mm: largest distance between a point's true path and its chord over the step.
+
+    theta: (...,) radians turned in the step; rho: (...,) mm, the point's distance from the local
+    origin. Returns rho * min(theta^2 / 8, 2) (see module docstring).
+    """
+    theta = np.asarray(theta, float)
+    return np.asarray(rho, float) * np.minimum(theta * theta / 8.0, 2.0)
+
+
+def max_speed(T0: np.ndarray, T1: np.ndarray, rho_max: float) -> float:
+    """mm per unit step time: bound on the speed of any point within rho_max of the local origin."""
+    theta = float(rotation_angle(T0, T1))
+    return float(np.linalg.norm(np.asarray(T1)[:3, 3] - np.asarray(T0)[:3, 3]) + theta * rho_max)
+
+
+def interpolate_poses(T0: np.ndarray, T1: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(m, 4, 4) poses of m bodies, each at its own time t (m,), stepping from T0 to T1 (m, 4, 4)."""
+    T0 = np.asarray(T0, float)
+    T1 = np.asarray(T1, float)
+    t = np.asarray(t, float)
+    w = rotation_vector(T0, T1)
+    out = np.tile(np.eye(4), (len(t), 1, 1))
+    out[:, :3, :3] = Rotation.from_rotvec(t[:, None] * w).as_matrix() @ T0[:, :3, :3]
+    out[:, :3, 3] = T0[:, :3, 3] + t[:, None] * (T1[:, :3, 3] - T0[:, :3, 3])
+    return out
