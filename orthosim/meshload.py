@@ -3,8 +3,8 @@
 A user's mesh is the one input most likely to be subtly broken (holes, flipped winding, metres
 instead of millimetres), and a broken mesh silently accepted would give a wrong simulation, so
 every file goes through `load_tooth_mesh`: it repairs what can be repaired without changing the
-shape (merging vertices, dropping degenerate or duplicate faces, filling single triangle or quad
-holes, fixing winding so the volume is positive) with a warning naming the file, and raises a
+shape (merging vertices, dropping degenerate or duplicate faces and tiny detached specks, filling
+triangle or quad holes, fixing winding so the volume is positive) with a warning naming the file, and raises a
 one-line `MeshError` for anything else. `load_mesh_folder` turns a folder of per-tooth meshes that
 are already in the arch frame (see `orthosim.dentition`) into a `Dentition`, estimating each
 tooth's local frame (`orthosim.tooth`) from its shape; `tooth_from_mesh` is the shared step that
@@ -40,6 +40,9 @@ _UNIT_GUESSES = ((1000.0, "metres"), (25.4, "inches"), (10.0, "centimetres"), (0
 # Long axis estimated from the shape (PCA) must be within this angle of the arch frame's y axis;
 # beyond it the mesh is almost certainly not in the arch frame and the estimate would be nonsense.
 MAX_PCA_TILT_DEG = 60.0
+
+# Separate pieces beside the main body are dropped (with a warning) only up to this volume fraction.
+MAX_DROPPED_VOLUME = 0.02
 
 CEJ_RULE = (
     "CEJ on the long axis at (occlusal-most point of the mesh along the axis) minus the Wheeler "
@@ -100,7 +103,7 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
         repaired.append(f"dropped {int((~keep).sum())} faces on {int(bad_vertex.sum())} NaN/infinite vertices")
         faces = faces[keep]
         if len(faces) == 0:
-            raise MeshError(where, "vertices", "every vertex is NaN or infinite", "re-export the mesh")
+            raise MeshError(where, "vertices", "every face uses a NaN or infinite vertex", "re-export the mesh")
     mesh = trimesh.Trimesh(vertices * scale, faces, process=False)
     mesh.remove_unreferenced_vertices()
 
@@ -135,6 +138,20 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
             raise MeshError(where, None, "has inconsistent face winding that cannot be fixed (non-manifold)",
                             "repair the mesh in a mesh editor and export it again")
         repaired.append("made face winding consistent")
+    if mesh.body_count > 1:
+        # CBCT segmentations can leave specks (or an inner pulp shell) beside the tooth: dropping
+        # them is safe when they are tiny; a second big piece means two teeth or a split tooth.
+        pieces = mesh.split(only_watertight=False)
+        volumes = np.array([abs(p.volume) for p in pieces])
+        biggest = int(volumes.argmax())
+        rest = float(volumes.sum() - volumes[biggest])
+        if rest > MAX_DROPPED_VOLUME * volumes[biggest]:
+            raise MeshError(where, None, f"holds {len(pieces)} separate closed pieces, the others "
+                            f"{100 * rest / volumes[biggest]:.0f}% of the largest's volume",
+                            "export one tooth per file as a single closed surface")
+        mesh = pieces[biggest]
+        repaired.append(f"dropped {len(pieces) - 1} small separate pieces "
+                        f"({100 * rest / volumes[biggest]:.2f}% of the tooth's volume)")
     if mesh.volume < 0:
         mesh.invert()
         repaired.append("inverted inside-out winding (normals now point outward)")

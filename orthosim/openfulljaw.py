@@ -91,6 +91,7 @@ def load_open_full_jaw(folder: str | Path) -> Dentition:
             long_axis[n] = -long_axis[n]
 
     order = sorted(meshes)
+    path_of = {fdi_of[u]: p for u, p in files.items()}
     scan_to_arch = _scan_to_arch(folder, order, centre, long_axis, meshes)
     R, t = scan_to_arch[:3, :3], scan_to_arch[:3, 3]
 
@@ -100,7 +101,7 @@ def load_open_full_jaw(folder: str | Path) -> Dentition:
         mesh = meshes[n].copy()
         mesh.apply_transform(scan_to_arch)
         axes = ToothAxes(long_axis=R @ long_axis[n], labial=R @ labial[n], point=R @ centre[n] + t)
-        tooth = tooth_from_mesh(n, mesh, axes, source=str(files[_universal_of(fdi_of, n)]))
+        tooth = tooth_from_mesh(n, mesh, axes, source=str(path_of[n]))
         teeth[n] = tooth
         mesial_arch = tooth.rest_pose[:3, :3] @ tooth.mesial
         x_sense["mesial" if (R @ x_end[n]) @ mesial_arch > 0 else "distal"] += 1
@@ -201,7 +202,3 @@ def _unit(v: np.ndarray, where, field: str) -> np.ndarray:
         raise MeshError(where, field, "end point equals the crown centre c (zero-length axis)",
                         "restore the file from the dataset")
     return v / norm
-
-
-def _universal_of(fdi_of: dict[int, int], fdi: int) -> int:
-    return next(u for u, n in fdi_of.items() if n == fdi)

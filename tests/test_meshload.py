@@ -295,3 +295,34 @@ def test_folder_not_in_arch_frame_is_refused(tmp_path):
     mesh.export(tmp_path / "11.stl")
     with pytest.raises(MeshError, match="11.stl.*arch frame"):
         load_mesh_folder(tmp_path)
+
+
+def test_small_speck_beside_the_tooth_is_dropped_with_a_warning(tmp_path):
+    speck = trimesh.creation.icosphere(subdivisions=1, radius=0.3)
+    speck.apply_translation([6.0, 0.0, 0.0])
+    path = tmp_path / "speck.stl"
+    trimesh.util.concatenate([_tooth_shape(), speck]).export(path)
+    with pytest.warns(MeshRepairWarning, match="speck.stl.*dropped 1 small separate piece"):
+        loaded = load_tooth_mesh(path)
+    assert loaded.body_count == 1 and loaded.volume == pytest.approx(_tooth_shape().volume, rel=1e-6)
+
+
+def test_two_teeth_in_one_file_are_refused(tmp_path):
+    other = _tooth_shape(length=18.0)
+    other.apply_translation([10.0, 0.0, 0.0])
+    path = tmp_path / "two.stl"
+    trimesh.util.concatenate([_tooth_shape(), other]).export(path)
+    with pytest.raises(MeshError, match="two.stl.*2 separate closed pieces"):
+        load_tooth_mesh(path)
+
+
+def test_nan_vertex_in_an_stl_drops_its_face_and_refills_it(tmp_path):
+    text = trimesh.exchange.stl.export_stl_ascii(_tooth_shape())
+    lines = text.splitlines()
+    first = next(i for i, line in enumerate(lines) if line.strip().startswith("vertex"))
+    lines[first] = "vertex nan 0 0"
+    path = tmp_path / "nan.stl"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.warns(MeshRepairWarning, match="nan.stl.*NaN.*filled"):
+        loaded = load_tooth_mesh(path)
+    assert np.isfinite(loaded.vertices).all() and loaded.is_watertight and loaded.volume > 0
