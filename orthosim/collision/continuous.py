@@ -33,14 +33,18 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
     when the (inflated) spheres stop overlapping along their chords.
     """
     ia, ib = pair_idx[:, 0], pair_idx[:, 1]
-    inv_a0 = np.linalg.inv(poses0[ia])
-    M_a1 = inv_a0 @ poses1[ia]  # a at t = 1, seen from a at t = 0
-    M_b = np.concatenate([inv_a0 @ poses0[ib], inv_a0 @ poses1[ib]], axis=1)  # (p, 8, 4): b at 0, 1
+    return swept_leaves_posed(model, pair_idx, poses0[ia], poses1[ia], poses0[ib], poses1[ib], first_only)
+
+
+def swept_leaves_posed(model: CollisionModel, pair_idx: np.ndarray, Ta0, Ta1, Tb0, Tb1, first_only: bool = False):
+    """As `swept_leaves`, with each pair's own end poses (p, 4, 4) for its tooth a and tooth b."""
+    inv_a0 = np.linalg.inv(Ta0)
+    M_a1 = inv_a0 @ Ta1  # a at t = 1, seen from a at t = 0
+    M_b = np.concatenate([inv_a0 @ Tb0, inv_a0 @ Tb1], axis=1)  # (p, 8, 4): b at 0, 1
     Rb = np.concatenate([M_b[:, 0:3, :3], M_b[:, 4:7, :3]], axis=1)  # (p, 6, 3)
     tb = np.concatenate([M_b[:, 0:3, 3], M_b[:, 4:7, 3]], axis=1)  # (p, 6)
-    theta = rotation_angle(poses0, poses1)  # (n,) per body
-    wa = np.minimum(theta[ia] ** 2 / 8.0, 2.0)
-    wb = np.minimum(theta[ib] ** 2 / 8.0, 2.0)
+    wa = chord_deviation_bound(rotation_angle(Ta0, Ta1), 1.0)  # mm of deviation per mm of |centre|
+    wb = chord_deviation_bound(rotation_angle(Tb0, Tb1), 1.0)
     last = model.depth - 1
     toc = {}
 

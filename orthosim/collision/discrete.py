@@ -19,7 +19,12 @@ def overlapping_leaves(model: CollisionModel, poses: np.ndarray, pair_idx: np.nd
 
     poses: (n, 4, 4) local -> arch frame in model body order; pair_idx: (p, 2) body indices.
     """
-    Ta, Tb = poses[pair_idx[:, 0]], poses[pair_idx[:, 1]]
+    return overlapping_leaves_posed(model, pair_idx, poses[pair_idx[:, 0]], poses[pair_idx[:, 1]], first_only)
+
+
+def overlapping_leaves_posed(model: CollisionModel, pair_idx: np.ndarray, Ta: np.ndarray, Tb: np.ndarray, first_only: bool = False):
+    """As `overlapping_leaves`, with each pair's own poses Ta, Tb (p, 4, 4): many poses of the same
+    teeth in one call (the accuracy study tests thousands of relative poses at once)."""
     Ra_T = np.transpose(Ta[:, :3, :3], (0, 2, 1))
     R_ab = Ra_T @ Tb[:, :3, :3]  # b's local frame -> a's local frame
     t_ab = np.einsum("pij,pj->pi", Ra_T, Tb[:, :3, 3] - Ta[:, :3, 3])
