@@ -135,8 +135,12 @@ class _ArchPlacer:
                 poses[fdi], s = self.pose(curve, fdi, side, s + slides.get(fdi, 0.0))
         return poses
 
-    def make_contacts(self, curve: BetaArch, slides: dict[int, float], query: MeshQuery) -> dict[int, float]:
-        """Slides (mm along the curve) that make every pair of neighbours touch within CONTACT_GAP_MAX."""
+    def make_contacts(self, curve: BetaArch, slides: dict[int, float], query: MeshQuery,
+                      midline_gap: float = 0.0) -> dict[int, float]:
+        """Slides (mm along the curve) that make every pair of neighbours touch within CONTACT_GAP_MAX.
+
+        The central incisors instead stand `midline_gap` mm apart (a diastema), within the same tolerance.
+        """
         slides = dict(slides)
         sides = self.sides()
         centrals = [t[0] for t in sides.values()]
@@ -144,7 +148,8 @@ class _ArchPlacer:
         def centrals_gap(delta):
             trial = {**slides, centrals[0]: delta, centrals[1]: delta}
             poses = self.place(curve, trial)
-            return query.distance(centrals[0], poses[centrals[0]], centrals[1], poses[centrals[1]]), trial
+            d = query.distance(centrals[0], poses[centrals[0]], centrals[1], poses[centrals[1]])
+            return (0.0 if d < midline_gap else d - midline_gap), trial
 
         slides = _slide_until_touching(centrals_gap, slides.get(centrals[0], 0.0))
         for teeth in sides.values():
@@ -219,8 +224,13 @@ def _lower_upper_posterior_until_touching(placer: _ArchPlacer, curve: BetaArch, 
 
 
 def build_parametric_dentition(resolution: int | str = "smooth", third_molars: bool = False,
+                               diastema_mm: float = 0.0,
                                settings: OcclusionSettings = OcclusionSettings()) -> Dentition:
-    """Build the parametric normal-occlusion model (see the module docstring). Takes a few seconds."""
+    """Build the parametric normal-occlusion model (see the module docstring). Takes a few seconds.
+
+    `diastema_mm` opens a space of that width between the central incisors of both arches (the
+    rest of each arch moves distally with them), as in the paper's third case.
+    """
     from scipy.optimize import least_squares
 
     positions = range(1, 9) if third_molars else range(1, 8)
@@ -235,7 +245,7 @@ def build_parametric_dentition(resolution: int | str = "smooth", third_molars: b
     lower_teeth = {n: b for n, b in blanks.items() if F.arch_of(n) is F.Arch.LOWER}
     upper_teeth = {n: b for n, b in blanks.items() if F.arch_of(n) is F.Arch.UPPER}
     lower = _ArchPlacer(F.Arch.LOWER, lower_teeth, settings, z_shift)
-    lower_slides = lower.make_contacts(lower_curve, {}, query)
+    lower_slides = lower.make_contacts(lower_curve, {}, query, diastema_mm)
     lower_poses = lower.place(lower_curve, lower_slides)
 
     upper = _ArchPlacer(F.Arch.UPPER, upper_teeth, settings, z_shift)
@@ -255,9 +265,9 @@ def build_parametric_dentition(resolution: int | str = "smooth", third_molars: b
     for _ in range(2):
         upper_curve, guess = fit_upper_curve(upper_slides, guess)
         _lower_upper_posterior_until_touching(upper, upper_curve, upper_slides, lower_poses, query)
-        upper_slides = upper.make_contacts(upper_curve, upper_slides, query)
+        upper_slides = upper.make_contacts(upper_curve, upper_slides, query, diastema_mm)
     _lower_upper_posterior_until_touching(upper, upper_curve, upper_slides, lower_poses, query)
-    upper_slides = upper.make_contacts(upper_curve, upper_slides, query)
+    upper_slides = upper.make_contacts(upper_curve, upper_slides, query, diastema_mm)
     upper_poses = upper.place(upper_curve, upper_slides)
 
     poses = {**lower_poses, **upper_poses}
@@ -266,12 +276,14 @@ def build_parametric_dentition(resolution: int | str = "smooth", third_molars: b
         "kind": "parametric",
         "resolution": resolution,
         "third_molars": third_molars,
+        "diastema_mm": diastema_mm,
         "lower_arch": {"width_mm": lower_curve.width, "depth_mm": lower_curve.depth},
         "upper_arch": {"width_mm": upper_curve.width, "depth_mm": upper_curve.depth},
         "upper_posterior_level_mm": upper.upper_posterior_level,
         "settings": settings.__dict__,
     }
-    return Dentition(teeth, f"parametric normal occlusion ({len(teeth)} teeth, {resolution})", info)
+    what = f"diastema {diastema_mm:g} mm" if diastema_mm else "normal occlusion"
+    return Dentition(teeth, f"parametric {what} ({len(teeth)} teeth, {resolution})", info)
 
 
 def _crown_center(mesh: trimesh.Trimesh) -> np.ndarray:
@@ -297,6 +309,6 @@ def _as_tooth(blank: _Blank, pose: np.ndarray) -> Tooth:
 
 
 @lru_cache(maxsize=8)
-def parametric_dentition(resolution: int | str = "smooth", third_molars: bool = False) -> Dentition:
-    """The default normal-occlusion model, built once per process for each resolution."""
-    return build_parametric_dentition(resolution, third_molars)
+def parametric_dentition(resolution: int | str = "smooth", third_molars: bool = False, diastema_mm: float = 0.0) -> Dentition:
+    """The parametric model, built once per process for each set of arguments (Dentition is immutable)."""
+    return build_parametric_dentition(resolution, third_molars, diastema_mm)

@@ -1,0 +1,324 @@
+"""Case files: a patient's teeth and a treatment plan, read from TOML and validated whole.
+
+A case names its model (the parametric dentition, a folder of per-tooth meshes, or an
+Open-Full-Jaw folder), the extractions, the loads (on a tooth or a group: a force in cN along a
+direction of the arch or a vector, applied at a point, and/or a moment in cN*mm), the wire
+(rectangular or round) and the timing (duration and step, days). Every problem in the file is
+reported before any work starts, one line naming the file, the field and the fix. See
+`cases/*.toml` for annotated examples; the full schema is in README.md.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import fdi as F
+from .errors import CaseError
+
+DIRECTIONS = ("mesial", "distal", "labial", "lingual", "occlusal", "apical")
+POINTS = ("bracket", "crown_center", "center_of_resistance")
+MOMENT_AXES = ("mesiodistal", "labiolingual", "long_axis")
+MOVEMENTS = ("auto", "translation", "tipping", "rotation", "extrusion", "intrusion")
+WIRES = ("rectangular", "round")
+DETECTORS = ("circles", "discrete", "continuous", "exact")
+MODEL_KINDS = ("parametric", "meshes", "open-full-jaw")
+# What each wire can do (the paper's wire models): a round wire only rotates the tooth, about the
+# point at 1/3 of root length; a rectangular wire translates under a force and rotates under a torque.
+WIRE_MOVEMENTS = {
+    "rectangular": ("auto", "translation", "extrusion", "intrusion", "rotation", "tipping"),
+    "round": ("auto", "tipping", "rotation"),
+}
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    kind: str = "parametric"
+    resolution: str | int = "smooth"  # parametric: ring points or a preset name
+    third_molars: bool = False  # parametric
+    diastema_mm: float = 0.0  # parametric: space between the central incisors, both arches
+    folder: Path | None = None  # meshes / open-full-jaw
+    files: dict[str, int] = field(default_factory=dict)  # meshes: file name -> FDI
+    scale: float = 1.0  # meshes: multiply coordinates (e.g. 1000 for metres)
+
+    def present_teeth(self) -> set[int]:
+        """FDI numbers the model will have, known without loading any mesh."""
+        if self.kind == "parametric":
+            positions = range(1, 9) if self.third_molars else range(1, 8)
+            return {10 * q + p for q in F.QUADRANTS for p in positions}
+        if self.kind == "meshes":
+            return set(self.files.values())
+        present = set()
+        for path in self.folder.glob("tooth_*.stl"):
+            try:
+                present.add(F.universal_to_fdi(int(path.stem.split("_", 1)[1])))
+            except ValueError:
+                continue
+        return present
+
+
+@dataclass(frozen=True)
+class Load:
+    teeth: tuple[int, ...]  # FDI numbers the load acts on (each tooth gets the full load)
+    force_cN: float = 0.0
+    direction: str | tuple[float, float, float] = "mesial"  # along the arch, or an arch-frame vector
+    point: str | tuple[float, float, float] = "bracket"  # where the force acts; tuple: local mm
+    moment_cNmm: float = 0.0
+    moment_axis: str = "mesiodistal"  # tooth-frame axis of the moment
+    movement: str = "auto"
+
+
+@dataclass(frozen=True)
+class Wire:
+    type: str = "rectangular"
+
+
+@dataclass(frozen=True)
+class Case:
+    path: Path
+    name: str
+    description: str
+    model: ModelSpec
+    extractions: tuple[int, ...]
+    loads: tuple[Load, ...]
+    wire: Wire
+    duration_days: float
+    step_days: float
+    detector: str
+
+    @property
+    def steps(self) -> int:
+        return max(1, int(math.ceil(self.duration_days / self.step_days - 1e-9)))
+
+    def build_dentition(self):
+        """The tooth models this case names (all present teeth; extractions are state, not model)."""
+        from .dentition import Dentition
+
+        m = self.model
+        if m.kind == "parametric":
+            from .parametric import parametric_dentition
+
+            dent: Dentition = parametric_dentition(m.resolution, m.third_molars, m.diastema_mm)
+            return dent
+        from . import meshload
+
+        if m.kind == "meshes":
+            return meshload.load_mesh_folder(m.folder, m.files, scale=m.scale)
+        return meshload.load_open_full_jaw(m.folder)
+
+
+class _Reader:
+    """Typed access to one TOML table, naming the file and the dotted field in every error."""
+
+    def __init__(self, path: Path, prefix: str, table: Any, allowed: tuple[str, ...]):
+        self.path, self.prefix = path, prefix
+        if not isinstance(table, dict):
+            self.fail(None, f"must be a table, got {type(table).__name__}", f"write it as [{prefix}]")
+        self.table = table
+        for key in table:
+            if key not in allowed:
+                self.fail(key, "unknown key", f"expected one of: {', '.join(allowed)}")
+
+    def name(self, key: str | None) -> str:
+        return self.prefix if key is None else (f"{self.prefix}.{key}" if self.prefix else key)
+
+    def fail(self, key: str | None, problem: str, fix: str) -> None:
+        raise CaseError(self.path, self.name(key), problem, fix)
+
+    def get(self, key: str, default: Any = None) -> Any:
+        return self.table.get(key, default)
+
+    def string(self, key: str, default: str | None = None, choices: tuple[str, ...] | None = None) -> str:
+        value = self.table.get(key, default)
+        if value is None:
+            self.fail(key, "missing", "add it" + (f" (one of: {', '.join(choices)})" if choices else ""))
+        if not isinstance(value, str):
+            self.fail(key, f"must be text, got {value!r}", "quote it")
+        if choices and value not in choices:
+            self.fail(key, f"unknown value {value!r}", f"use one of: {', '.join(choices)}")
+        return value
+
+    def number(self, key: str, default: float | None = None, positive: bool = False, minimum: float | None = 0.0) -> float:
+        value = self.table.get(key, default)
+        if value is None:
+            self.fail(key, "missing", "add a number")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(key, f"must be a number, got {value!r}", "write a plain number")
+        value = float(value)
+        if not math.isfinite(value):
+            self.fail(key, f"must be finite, got {value}", "write a finite number (no nan or inf)")
+        if positive and value <= 0:
+            self.fail(key, f"must be positive, got {value:g}", "use a value above 0")
+        if minimum is not None and value < minimum:
+            self.fail(key, f"must be at least {minimum:g}, got {value:g}", f"use a value of {minimum:g} or more")
+        return value
+
+    def boolean(self, key: str, default: bool) -> bool:
+        value = self.table.get(key, default)
+        if not isinstance(value, bool):
+            self.fail(key, f"must be true or false, got {value!r}", "write true or false")
+        return value
+
+    def vector(self, key: str, value: Any) -> tuple[float, float, float]:
+        if not (isinstance(value, list) and len(value) == 3 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+            self.fail(key, f"must be a list of three numbers, got {value!r}", "write [x, y, z]")
+        v = tuple(float(x) for x in value)
+        if not all(math.isfinite(x) for x in v):
+            self.fail(key, f"must be finite, got {list(v)}", "write finite numbers (no nan or inf)")
+        return v
+
+    def tooth(self, key: str, value: Any, present: set[int]) -> int:
+        if not F.is_fdi(value):
+            self.fail(key, f"unknown tooth {value!r}", "use an FDI number: 11-18, 21-28, 31-38 or 41-48")
+        if value not in present:
+            self.fail(key, f"tooth {value} ({F.name(value)}) is not in the model",
+                      f"use one of the model's teeth ({_ranges(present)}) or add it to the model")
+        return value
+
+
+def _ranges(teeth: set[int]) -> str:
+    return ", ".join(str(t) for t in sorted(teeth))
+
+
+_TOP = ("case", "model", "treatment", "wire", "loads")
+_CASE = ("name", "description")
+_MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files", "scale")
+_TREATMENT = ("extractions", "duration_days", "step_days", "detector")
+_WIRE = ("type",)
+_LOAD = ("teeth", "force_cN", "direction", "point", "moment_cNmm", "moment_axis", "movement")
+
+
+def load_case(path: str | Path) -> Case:
+    """Read and validate a case file; raise CaseError (one line: file, field, fix) on any problem."""
+    path = Path(path)
+    if not path.is_file():
+        raise CaseError(path, None, "no such case file", "check the path; shipped cases are in cases/")
+    try:
+        with path.open("rb") as fh:
+            data = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as err:
+        raise CaseError(path, None, f"not valid TOML: {err}", "fix the syntax at that line") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise CaseError(path, None, f"cannot be read: {err}", "check the file is a readable TOML text file") from None
+
+    top = _Reader(path, "", data, _TOP)
+    meta = _Reader(path, "case", top.get("case", {}), _CASE)
+    name = meta.string("name", path.stem)
+    description = meta.string("description", "")
+
+    model = _read_model(path, _Reader(path, "model", top.get("model", {}), _MODEL))
+    present = model.present_teeth()
+
+    treat = _Reader(path, "treatment", top.get("treatment", {}), _TREATMENT)
+    raw_ext = treat.get("extractions", [])
+    if not isinstance(raw_ext, list):
+        treat.fail("extractions", f"must be a list of FDI numbers, got {raw_ext!r}", "write e.g. [14, 24]")
+    extractions = []
+    for i, t in enumerate(raw_ext):
+        if F.is_fdi(t) and t not in present:
+            treat.fail(f"extractions[{i}]", f"tooth {t} ({F.name(t)}) cannot be extracted: it is not in the model",
+                       "remove it from the list")
+        extractions.append(treat.tooth(f"extractions[{i}]", t, present))
+    if len(set(extractions)) != len(extractions):
+        treat.fail("extractions", "lists a tooth twice", "list each tooth once")
+    duration = treat.number("duration_days", 90.0, positive=True)
+    step = treat.number("step_days", 1.0, positive=True)
+    if step > duration:
+        treat.fail("step_days", f"step ({step:g} days) is longer than the duration ({duration:g} days)",
+                   "use a step no longer than duration_days")
+    if duration / step > 100_000:
+        treat.fail("step_days", f"{duration / step:.0f} steps is more than 100000", "use a longer step")
+    detector = treat.string("detector", "continuous", DETECTORS)
+
+    wire = Wire(_Reader(path, "wire", top.get("wire", {}), _WIRE).string("type", "rectangular", WIRES))
+
+    raw_loads = top.get("loads", [])
+    if not isinstance(raw_loads, list):
+        top.fail("loads", "must be an array of tables", "write each load as [[loads]]")
+    loads = tuple(_read_load(path, i, raw, present, set(extractions), wire) for i, raw in enumerate(raw_loads))
+    return Case(path, name, description, model, tuple(extractions), loads, wire, duration, step, detector)
+
+
+def _read_model(path: Path, r: _Reader) -> ModelSpec:
+    kind = r.string("kind", "parametric", MODEL_KINDS)
+    if kind == "parametric":
+        for key in ("folder", "files", "scale"):
+            if key in r.table:
+                r.fail(key, "applies only to mesh models", "remove it, or set kind = \"meshes\"")
+        resolution = r.get("resolution", "smooth")
+        from .toothshape import RESOLUTIONS
+
+        if isinstance(resolution, str):
+            if resolution not in RESOLUTIONS:
+                r.fail("resolution", f"unknown resolution {resolution!r}", f"use one of {', '.join(RESOLUTIONS)} or an even number >= 6")
+        elif isinstance(resolution, bool) or not isinstance(resolution, int) or resolution < 6 or resolution % 2:
+            r.fail("resolution", f"must be a preset name or an even number >= 6, got {resolution!r}", "use e.g. \"smooth\" or 40")
+        return ModelSpec(kind, resolution, r.boolean("third_molars", False), r.number("diastema_mm", 0.0))
+
+    for key in ("resolution", "third_molars", "diastema_mm"):
+        if key in r.table:
+            r.fail(key, "applies only to the parametric model", "remove it, or set kind = \"parametric\"")
+    folder_raw = r.string("folder")
+    folder = Path(folder_raw).expanduser()
+    if not folder.is_absolute():
+        folder = (path.parent / folder).resolve()  # relative to the case file, so cases travel with their data
+    if not folder.is_dir():
+        r.fail("folder", f"no such folder {folder}", "give a folder of tooth meshes, relative to the case file or absolute")
+    files: dict[str, int] = {}
+    if kind == "meshes":
+        raw_files = r.get("files")
+        if not isinstance(raw_files, dict) or not raw_files:
+            r.fail("files", "missing or empty", "add a table [model.files] mapping each mesh file to its FDI number")
+        for fname, number in raw_files.items():
+            if not F.is_fdi(number):
+                r.fail(f"files.{fname}", f"unknown tooth {number!r}", "use an FDI number: 11-18, 21-28, 31-38 or 41-48")
+            if not (folder / fname).is_file():
+                r.fail(f"files.{fname}", f"no such file in {folder}", "check the file name")
+            files[fname] = number
+        if len(set(files.values())) != len(files):
+            r.fail("files", "two files map to the same tooth", "give each FDI number once")
+    elif "files" in r.table:
+        r.fail("files", "not used by open-full-jaw folders (tooth_N.stl names the tooth)", "remove it")
+    elif not any(folder.glob("tooth_*.stl")):
+        r.fail("folder", f"no tooth_N.stl files in {folder}", "point it at an Open-Full-Jaw maxilla or mandible folder")
+    return ModelSpec(kind, folder=folder, files=files, scale=r.number("scale", 1.0, positive=True))
+
+
+def _read_load(path: Path, i: int, raw: Any, present: set[int], extracted: set[int], wire: Wire) -> Load:
+    r = _Reader(path, f"loads[{i}]", raw, _LOAD)
+    teeth_raw = r.get("teeth")
+    if isinstance(teeth_raw, int) and not isinstance(teeth_raw, bool):
+        teeth_raw = [teeth_raw]
+    if not isinstance(teeth_raw, list) or not teeth_raw:
+        r.fail("teeth", "missing or empty", "name the tooth or teeth, e.g. teeth = [16, 26]")
+    teeth = tuple(r.tooth(f"teeth[{j}]", t, present) for j, t in enumerate(teeth_raw))
+    for j, t in enumerate(teeth):
+        if t in extracted:
+            r.fail(f"teeth[{j}]", f"tooth {t} is extracted in this case and cannot carry a load",
+                   "load a tooth that stays, or remove it from treatment.extractions")
+    force = r.number("force_cN", 0.0)
+    moment = r.number("moment_cNmm", 0.0, minimum=None)
+    if force == 0.0 and moment == 0.0:
+        r.fail(None, "has neither a force nor a moment", "set force_cN (cN) and/or moment_cNmm (cN*mm)")
+    direction_raw = r.get("direction", "mesial")
+    if isinstance(direction_raw, str):
+        direction = r.string("direction", "mesial", DIRECTIONS)
+    else:
+        direction = r.vector("direction", direction_raw)
+        if np.linalg.norm(direction) == 0:
+            r.fail("direction", "is the zero vector", "give a non-zero direction in the arch frame")
+    point_raw = r.get("point", "bracket")
+    point = r.string("point", "bracket", POINTS) if isinstance(point_raw, str) else r.vector("point", point_raw)
+    moment_axis = r.string("moment_axis", "mesiodistal", MOMENT_AXES)
+    movement = r.string("movement", "auto", MOVEMENTS)
+    if movement not in WIRE_MOVEMENTS[wire.type]:
+        r.fail("movement", f"a {wire.type} wire cannot do {movement} (it only rotates the tooth)",
+               f"use a rectangular wire, or one of: {', '.join(WIRE_MOVEMENTS[wire.type])}")
+    if movement in ("rotation", "tipping") and wire.type == "rectangular" and moment == 0.0:
+        r.fail("movement", f"{movement} with a rectangular wire needs a torque", "set moment_cNmm, or use movement = \"translation\"")
+    return Load(teeth, force, direction, point, moment, moment_axis, movement)

@@ -1,0 +1,145 @@
+"""The `orthosim` command line: the composition root that wires the core and the renderer.
+
+This is the one module of `orthosim` allowed to import `render`, and it does so lazily inside the
+commands that draw, so `orthosim --help` and the simulation-only commands never load OpenGL.
+Every error a user can cause is an `OrthosimError`; `main` prints it as one line on stderr and exits
+with its code (2), never with a traceback.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import click
+
+from . import __version__
+from .errors import OrthosimError
+
+ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_CASE = ROOT / "cases" / "normal_occlusion.toml"
+
+
+def _size(ctx, param, value: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in value.lower().split("x"))
+        if not (16 <= w <= 8192 and 16 <= h <= 8192):
+            raise ValueError
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT in pixels (16 to 8192), e.g. 640x480") from None
+    return w, h
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+@click.version_option(__version__, prog_name="orthosim")
+def main() -> None:
+    """Headless orthodontic treatment simulator: tooth movement, collision detection, offscreen rendering."""
+
+
+def render_options(f):
+    """Options shared by the commands that draw frames."""
+    f = click.option("--no-render", is_flag=True, help="Run the simulation alone; write no images.")(f)
+    f = click.option("--size", default="640x480", show_default=True, callback=_size, help="Image size WIDTHxHEIGHT.")(f)
+    f = click.option("--view", "views", multiple=True,
+                     help="Camera preset (repeatable): frontal, right_buccal, left_buccal, maxillary, mandibular. Default: frontal.")(f)
+    f = click.option("--gif", is_flag=True, help="Also write animation.gif.")(f)
+    f = click.option("--alpha", is_flag=True, help="PNG frames with a transparent background.")(f)
+    f = click.option("--hide-roots", is_flag=True, help="Draw crowns only.")(f)
+    return f
+
+
+@main.command()
+@click.argument("case", type=click.Path(path_type=Path))
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=None,
+              help="Output folder (default: out/<case name>).")
+@click.option("--detector", type=click.Choice(["circles", "discrete", "continuous", "exact"]), default=None,
+              help="Collision detector (default: the case's).")
+@render_options
+def run(case: Path, out_dir: Path | None, detector: str | None, **render_opts) -> None:
+    """Run one case: simulate, detect, write frames and metrics."""
+    _run_case(case, out_dir or Path("out") / case.stem, detector, render_opts)
+
+
+@main.command()
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("out/demo"), show_default=True,
+              help="Output folder.")
+@render_options
+def demo(out_dir: Path, **render_opts) -> None:
+    """Run the shipped default case into out/demo/."""
+    _run_case(DEFAULT_CASE, out_dir, None, render_opts)
+
+
+@main.command()
+@click.argument("cases", nargs=-1, required=True, type=click.Path(path_type=Path))
+def check(cases: tuple[Path, ...]) -> None:
+    """Validate case files without running them."""
+    from .case import load_case
+
+    for path in cases:
+        case = load_case(path)
+        click.echo(f"{path}: ok ({case.name}; {len(case.loads)} loads, {len(case.extractions)} extractions, {case.steps} steps)")
+
+
+def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> None:
+    from .atomic import write_json
+    from .case import load_case
+    from .metrics import model_summary, tooth_to_tooth_distances
+
+    case = load_case(case_path)
+    started = time.perf_counter()
+    dent = case.build_dentition()
+    extracted = set(case.extractions)
+    poses = dent.rest_poses()
+    distances = tooth_to_tooth_distances(dent, poses, extracted)
+    summary = model_summary(dent, poses)
+    metrics = {
+        "case": case.name,
+        "case_file": str(case.path),
+        "detector": detector or case.detector,
+        "model": {"description": dent.description, **dent.info},
+        "simulated": False,  # tooth movement is not implemented yet: this is the initial model
+        "steps": 0,
+        "extracted": sorted(extracted),
+        **summary,
+        "distances": [{"pair": list(d.pair), "initial_mm": d.distance_mm} for d in distances],
+        "total_distance_mm": {"initial": sum(d.distance_mm for d in distances)},
+    }
+    if not render_opts.get("no_render"):
+        metrics.update(_render_initial(dent, poses, extracted, out_dir, render_opts))
+    metrics["wall_s"] = time.perf_counter() - started
+    write_json(out_dir / "metrics.json", metrics)
+    click.echo(f"{case.name}: {len(dent.teeth)} teeth, {len(extracted)} extracted -> {out_dir}/metrics.json")
+
+
+def _render_initial(dent, poses, extracted, out_dir: Path, opts: dict) -> dict:
+    """Render the model as it stands (one frame per view) into out_dir/frames."""
+    from render.animation import render_run
+    from render.frame_state import FrameState
+
+    frames = [FrameState(poses=poses, extracted=frozenset(extracted))]
+    return render_run(dent, frames, out_dir, views=opts.get("views") or ("frontal",), size=opts["size"],
+                      gif=opts.get("gif", False), alpha=opts.get("alpha", False),
+                      hide_roots=opts.get("hide_roots", False))
+
+
+def entry() -> None:
+    """Console-script entry: run the CLI, turning user errors into one line and an exit code."""
+    try:
+        main.main(standalone_mode=False)
+    except OrthosimError as err:
+        click.echo(f"orthosim: error: {err}", err=True)
+        sys.exit(err.exit_code)
+    except click.exceptions.Abort:
+        click.echo("orthosim: aborted", err=True)
+        sys.exit(130)
+    except click.ClickException as err:
+        err.show()
+        sys.exit(err.exit_code)
+    except KeyboardInterrupt:
+        click.echo("orthosim: interrupted", err=True)
+        sys.exit(130)
+    except BrokenPipeError:
+        sys.exit(1)
+    except SystemExit:
+        raise

@@ -1,0 +1,57 @@
+"""Figures of a model or a run that users compare across cases and detectors.
+
+The paper's tooth-to-tooth distance: for each pair of adjacent teeth in an arch, the distance in
+the occlusal (x-z) plane between the geometric centres of their crowns,
+d = sqrt((x1 - x2)^2 + (z1 - z2)^2), in mm; the sum over an arch measures how closely the teeth
+fit (smaller is better), and a gap over 1 mm between neighbours cannot be neglected in practice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import fdi as F
+from .dentition import Dentition
+from .occlusion import bolton_ratios, molar_relation, overbite, overjet
+
+Poses = dict[int, np.ndarray]
+
+
+@dataclass(frozen=True)
+class PairDistance:
+    pair: tuple[int, int]  # FDI numbers, right to left along the arch
+    distance_mm: float
+
+
+def tooth_to_tooth_distances(dent: Dentition, poses: Poses | None = None, absent: set[int] = frozenset()) -> list[PairDistance]:
+    """The paper's distance for every adjacent pair of present teeth (extraction spaces bridged)."""
+    centers = dent.crown_centers(poses)
+    return [PairDistance((a, b), float(np.hypot(*(centers[a] - centers[b])[[0, 2]])))
+            for a, b in dent.adjacent_pairs(absent)]
+
+
+def model_summary(dent: Dentition, poses: Poses | None = None) -> dict:
+    """Per-tooth landmarks and the occlusal figures of a (posed) dentition, ready for JSON."""
+    centers = dent.crown_centers(poses)
+    teeth = {}
+    for n in dent.fdis:
+        t = dent.teeth[n]
+        pose = t.rest_pose if poses is None else poses[n]
+        teeth[str(n)] = {
+            "name": F.name(n),
+            "crown_center_mm": centers[n],
+            "apex_mm": t.to_world(t.apex, pose),
+            "long_axis": pose[:3, :3] @ t.long_axis,
+            "pose": pose,
+            "faces": int(len(t.mesh.faces)),
+            "volume_mm3": float(t.mesh.volume),
+        }
+    out = {"teeth": teeth}
+    if {11, 21, 31, 41} <= set(dent.teeth):
+        out["occlusion"] = {"overjet_mm": overjet(dent, poses), "overbite_mm": overbite(dent, poses),
+                            "molar_relation_mm": molar_relation(dent, poses)}
+    if all(10 * q + p in dent.teeth for q in F.QUADRANTS for p in range(1, 7)):
+        out["bolton_percent"] = bolton_ratios(dent)
+    return out
