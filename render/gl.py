@@ -1,0 +1,105 @@
+"""The one place that imports pyrender and OpenGL, with the fixes they need to run headless here.
+
+Every module of `render/` that needs pyrender gets it through `load_pyrender()`, so the order of
+the steps below is guaranteed whichever module is imported first:
+  1. `PYOPENGL_PLATFORM=osmesa` (unless the user chose another platform) before OpenGL loads, so
+     tests and the CLI render without a display and without the user setting anything;
+  2. PyOpenGL's per-call `glGetError` check switched off (`OPENGL_ERROR_CHECKING=1` in the
+     environment turns it back on for debugging): it doubles the cost of every GL call and the
+     renderer makes a few hundred per frame;
+  3. `np.infty` restored for numpy 2 (pyrender's mesh bounds still use the removed alias);
+  4. `pyrender.viewer` replaced by an empty module, because importing it pulls in pyglet and the
+     on-screen libGL that a headless machine may not have;
+  5. pyrender's shader cache keyed on the integer value of the current context: under OSMesa
+     `OpenGL.contextdata.getContext()` returns a fresh ctypes pointer object on every call, so
+     the stock cache never hits, recompiles every shader on every draw (~4 fps) and leaks the
+     programs (gigabytes over a long run).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import sys
+import types
+
+_loaded = None
+
+
+def _context_key(cid) -> int:
+    """The current GL context as a stable integer, whatever type PyOpenGL's platform returns."""
+    if cid is None:
+        return 0
+    if isinstance(cid, int):
+        return cid
+    value = getattr(cid, "value", None)  # c_void_p and friends
+    if isinstance(value, int):
+        return value
+    try:
+        return ctypes.cast(cid, ctypes.c_void_p).value or 0
+    except (TypeError, ctypes.ArgumentError):
+        return id(cid)
+
+
+def _patch_shader_cache(pyrender_shader_program) -> None:
+    import OpenGL.contextdata
+
+    cache_cls = pyrender_shader_program.ShaderProgramCache
+    if getattr(cache_cls, "_orthosim_patched", False):
+        return
+    ShaderProgram = pyrender_shader_program.ShaderProgram
+
+    def get_program(self, vertex_shader, fragment_shader, geometry_shader=None, defines=None):
+        defines = defines or {}
+        names = [os.path.basename(fn) for fn in (vertex_shader, fragment_shader, geometry_shader) if fn is not None]
+        key = (_context_key(OpenGL.contextdata.getContext()),) + tuple(
+            sorted([(s, 1) for s in names] + [(d, defines[d]) for d in defines])
+        )
+        program = self._program_cache.get(key)
+        if program is None:
+            paths = [os.path.join(self.shader_dir, fn) if fn is not None else None
+                     for fn in (vertex_shader, fragment_shader, geometry_shader)]
+            program = ShaderProgram(vertex_shader=paths[0], fragment_shader=paths[1],
+                                    geometry_shader=paths[2], defines=defines)
+            self._program_cache[key] = program
+        return program
+
+    cache_cls.get_program = get_program
+    cache_cls._orthosim_patched = True
+
+
+def load_pyrender():
+    """Import pyrender with the headless fixes applied (idempotent); returns the module."""
+    global _loaded
+    if _loaded is not None:
+        return _loaded
+    os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+    import OpenGL
+
+    if "OpenGL.GL" not in sys.modules:
+        OpenGL.ERROR_CHECKING = os.environ.get("OPENGL_ERROR_CHECKING", "") == "1"
+    import numpy as np
+
+    if not hasattr(np, "infty"):
+        np.infty = np.inf
+    if "pyrender.viewer" not in sys.modules:
+        stub = types.ModuleType("pyrender.viewer")
+        stub.__doc__ = "orthosim stub: the interactive pyglet viewer is never used headless."
+
+        class Viewer:  # noqa: D401 - placeholder with the name pyrender exports
+            def __init__(self, *args, **kwargs):
+                raise RuntimeError("pyrender's on-screen Viewer is disabled in orthosim (headless)")
+
+        stub.Viewer = Viewer
+        sys.modules["pyrender.viewer"] = stub
+    import pyrender
+    import pyrender.shader_program
+
+    _patch_shader_cache(pyrender.shader_program)
+    _loaded = pyrender
+    return pyrender
+
+
+def shader_dir() -> str:
+    """Folder of orthosim's own GLSL shaders (Lambert shading; see render/shaders/)."""
+    return os.path.join(os.path.dirname(os.path.abspath(__file__)), "shaders")

@@ -1,0 +1,279 @@
+"""The renderer: owns the offscreen OSMesa OpenGL context and turns a `DentitionScene` into pixels.
+
+Drawing goes through pyrender's `Renderer` with three changes, each measured by `orthosim bench`
+(see render/bench.py):
+  - our Lambert shaders (render/shaders/) instead of pyrender's physically based ones;
+  - no depth read-back: pyrender always reads and linearises the depth buffer, which we never use;
+  - the image is taken straight from OSMesa's client-side colour buffer after `glFinish`, instead
+    of a `glReadPixels` copy into a new bytes object (the frame lives there already).
+Anti-aliasing (4x multisampling through pyrender's framebuffer path) is optional: it costs a blit
+and a `glReadPixels` per frame.
+
+Before each draw the renderer uploads the buffers the scene changed (`DentitionScene.buffer_versions`):
+contact-marker instances go into a preallocated instance buffer with `glBufferSubData`, grown by
+doubling, so a 2,000-frame run allocates a handful of GL buffers, not 2,000.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .gl import load_pyrender, shader_dir
+
+
+def _lean_renderer_class(pyrender, GL):
+    """A pyrender.Renderer whose forward pass binds the program, camera and lights once per frame.
+
+    Why: the stock pass re-binds the program, camera matrices and every light uniform for every
+    primitive, each uniform through a `glGetUniformLocation` lookup and PyOpenGL's argument
+    wrapping; with 28 teeth that is ~600 wrapped GL calls and most of the frame time on this
+    machine. Here a frame costs a fixed ~20 calls plus 4 per visible node (model matrix, colour
+    factor, vertex array, draw). Uniform locations are cached per program. Only what our scenes
+    use is supported: opaque triangle primitives without textures, directional lights, our shaders.
+    """
+    from pyrender.constants import BufFlags
+
+    class LeanRenderer(pyrender.Renderer):
+        def __init__(self, *args, lighting: str = "vertex", **kwargs):
+            super().__init__(*args, **kwargs)
+            self._locations: dict[tuple[int, str], int] = {}
+            self._shader_files = ("gouraud.vert", "gouraud.frag") if lighting == "vertex" else ("mesh.vert", "mesh.frag")
+
+        def _program_for(self, primitive, n_lights: int):
+            # Attribute locations follow pyrender's Primitive._add_to_context buffer layout.
+            defines = {}
+            loc = 1
+            bf = primitive.buf_flags
+            for flag, name in ((BufFlags.NORMAL, "NORMAL_LOC"), (BufFlags.TANGENT, "TANGENT_LOC"),
+                               (BufFlags.TEXCOORD_0, "TEXCOORD_0_LOC"), (BufFlags.TEXCOORD_1, "TEXCOORD_1_LOC"),
+                               (BufFlags.COLOR_0, "COLOR_0_LOC")):
+                if bf & flag:
+                    defines[name] = loc
+                    loc += 1
+            defines["INST_M_LOC"] = loc
+            defines["MAX_DIRECTIONAL_LIGHTS"] = max(n_lights, 1)
+            program = self._program_cache.get_program(*self._shader_files, defines=defines)
+            if not program._in_context():
+                program._add_to_context()
+            return program
+
+        def _loc(self, program, name: str) -> int:
+            key = (program._program_id, name)
+            loc = self._locations.get(key)
+            if loc is None:
+                loc = GL.glGetUniformLocation(program._program_id, name)
+                self._locations[key] = loc
+            return loc
+
+        def _forward_pass(self, scene, flags, seg_node_map=None):
+            self._configure_forward_pass_viewport(flags)
+            GL.glClearColor(*scene.bg_color)
+            GL.glClear(GL.GL_COLOR_BUFFER_BIT | GL.GL_DEPTH_BUFFER_BIT)
+            GL.glDisable(GL.GL_BLEND)  # every surface we draw is opaque
+            GL.glPolygonMode(GL.GL_FRONT_AND_BACK, GL.GL_FILL)
+            if flags & pyrender.RenderFlags.OFFSCREEN:
+                GL.glEnable(GL.GL_MULTISAMPLE)
+            V, P = self._get_camera_matrices(scene)
+            cam_pos = scene.get_pose(scene.main_camera_node)[:3, 3].astype(np.float32)
+            VP = np.ascontiguousarray(V.T, dtype=np.float32), np.ascontiguousarray(P.T, dtype=np.float32)
+            lights = []
+            for ln in scene.directional_light_nodes:
+                pose = scene.get_pose(ln)
+                lights.append((-pose[:3, 2], ln.light.color, float(ln.light.intensity)))
+            bound_program = None
+            cull = None
+            # Nearest first: the depth test then rejects hidden fragments before they are shaded.
+            nodes = []
+            for node in scene.mesh_nodes:
+                if node.mesh.is_visible:
+                    pose = scene.get_pose(node)
+                    nodes.append((float(np.sum((pose[:3, 3] - cam_pos) ** 2)), id(node), node, pose))
+            nodes.sort(key=lambda item: item[:2])
+            for _, _, node, pose in nodes:
+                mesh = node.mesh
+                M = np.ascontiguousarray(pose.T, dtype=np.float32)
+                for primitive in mesh.primitives:
+                    program = self._program_for(primitive, len(lights))
+                    if program is not bound_program:
+                        program._bind()
+                        bound_program = program
+                        GL.glUniformMatrix4fv(self._loc(program, "V"), 1, GL.GL_FALSE, VP[0])
+                        GL.glUniformMatrix4fv(self._loc(program, "P"), 1, GL.GL_FALSE, VP[1])
+                        GL.glUniform3fv(self._loc(program, "cam_pos"), 1, cam_pos)
+                        GL.glUniform3fv(self._loc(program, "ambient_light"), 1,
+                                        np.asarray(scene.ambient_light, np.float32))
+                        GL.glUniform1i(self._loc(program, "n_directional_lights"), len(lights))
+                        for i, (direction, colour, intensity) in enumerate(lights):
+                            b = f"directional_lights[{i}]."
+                            GL.glUniform3fv(self._loc(program, b + "direction"), 1, direction.astype(np.float32))
+                            GL.glUniform3fv(self._loc(program, b + "color"), 1, np.asarray(colour, np.float32))
+                            GL.glUniform1f(self._loc(program, b + "intensity"), intensity)
+                    material = primitive.material
+                    GL.glUniformMatrix4fv(self._loc(program, "M"), 1, GL.GL_FALSE, M)
+                    GL.glUniform4fv(self._loc(program, "material.base_color_factor"), 1,
+                                    np.asarray(material.baseColorFactor, np.float32))
+                    GL.glUniform3fv(self._loc(program, "material.emissive_factor"), 1,
+                                    np.asarray(material.emissiveFactor, np.float32))
+                    GL.glUniform1f(self._loc(program, "material.roughness_factor"), float(material.roughnessFactor))
+                    want_cull = not material.doubleSided
+                    if want_cull != cull:
+                        (GL.glEnable if want_cull else GL.glDisable)(GL.GL_CULL_FACE)
+                        GL.glCullFace(GL.GL_BACK)
+                        cull = want_cull
+                    GL.glBindVertexArray(primitive._vaid)
+                    n_instances = 1 if primitive.poses is None else len(primitive.poses)
+                    GL.glDrawElementsInstanced(primitive.mode, primitive.indices.size, GL.GL_UNSIGNED_INT,
+                                               None, n_instances)
+            GL.glBindVertexArray(0)
+            if bound_program is not None:
+                bound_program._unbind()
+            GL.glFlush()
+            if flags & pyrender.RenderFlags.OFFSCREEN:
+                return self._read_main_framebuffer(scene, flags)
+            return None
+
+    return LeanRenderer
+
+
+class Renderer:
+    """Offscreen renderer of fixed image size; use as a context manager or call `close()`."""
+
+    def __init__(self, size: tuple[int, int] = (640, 480), *, alpha: bool = False, msaa: bool = False,
+                 shading: str = "lambert", lean: bool = True, lighting: str = "vertex"):
+        """`shading` "pbr" (pyrender's own shaders) and `lean=False` (pyrender's stock forward pass)
+        exist only so that the bench can measure what each optimisation buys."""
+        pyrender = load_pyrender()
+        from OpenGL import GL
+        from pyrender.platforms.osmesa import OSMesaPlatform
+
+        self._GL = GL
+        self._pyrender = pyrender
+        self.size = (int(size[0]), int(size[1]))
+        self.alpha = alpha
+        self.msaa = msaa
+        w, h = self.size
+        self._platform = OSMesaPlatform(w, h)
+        self._platform.init_context()
+        self._platform.make_current()
+        if lean and shading != "lambert":
+            raise ValueError("the lean forward pass drives orthosim's Lambert shaders only")
+        self._inner = (_lean_renderer_class(pyrender, GL)(w, h, lighting=lighting) if lean
+                       else pyrender.Renderer(w, h))
+        if shading == "lambert":
+            # Our shaders replace pyrender's; the cache is created by pyrender.Renderer.__init__.
+            self._inner._program_cache = pyrender.shader_program.ShaderProgramCache(shader_dir=shader_dir())
+        self.shading = shading
+        self.lean = lean
+        self.lighting = lighting if lean else "pixel"
+        self._seen_versions: dict[object, int] = {}
+        self._instance_capacity: dict[object, int] = {}
+        self._flags = pyrender.RenderFlags.NONE
+        if msaa:
+            self._flags |= pyrender.RenderFlags.OFFSCREEN | pyrender.RenderFlags.RGBA
+            # pyrender would read and linearise depth too: read colour only
+            self._inner._read_main_framebuffer = self._read_msaa_colour
+        self.frames = 0
+
+    # --------------------------------------------------------------------------------- info
+    @property
+    def gl_renderer(self) -> str:
+        """The GL renderer string (e.g. 'llvmpipe (LLVM 15.0.6, 256 bits)'), for the bench record."""
+        self._platform.make_current()
+        return self._GL.glGetString(self._GL.GL_RENDERER).decode(errors="replace")
+
+    @property
+    def gl_version(self) -> str:
+        self._platform.make_current()
+        return self._GL.glGetString(self._GL.GL_VERSION).decode(errors="replace")
+
+    # ------------------------------------------------------------------------------ drawing
+    def render(self, scene, view: str | None = None) -> np.ndarray:
+        """Draw `scene` from preset `view` (the scene's current one if None).
+
+        Returns (h, w, 3) uint8 RGB, or (h, w, 4) RGBA with a transparent background when the
+        renderer was made with alpha=True. Reads the scene, never changes it, except for selecting
+        `view` on it.
+        """
+        if view is not None and (scene.current_view is None or scene.current_view.name != view):
+            scene.set_view(view)
+        self._platform.make_current()
+        self._sync_buffers(scene)
+        out = self._inner.render(scene.scene, self._flags)
+        if self.msaa:
+            rgba = out
+        else:
+            self._GL.glFinish()
+            buf = np.asarray(self._platform._buffer)  # (h, w, 4) uint8, OSMesa's own colour buffer
+            rgba = buf[::-1]  # OSMesa stores the bottom row first
+        self.frames += 1
+        if self.alpha:
+            return np.ascontiguousarray(rgba)
+        return np.ascontiguousarray(rgba[:, :, :3])
+
+    def _read_msaa_colour(self, scene, flags):
+        GL = self._GL
+        inner = self._inner
+        w, h = inner._main_fb_dims
+        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, inner._main_fb_ms)
+        GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, inner._main_fb)
+        GL.glBlitFramebuffer(0, 0, w, h, 0, 0, w, h, GL.GL_COLOR_BUFFER_BIT, GL.GL_LINEAR)
+        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, inner._main_fb)
+        data = GL.glReadPixels(0, 0, w, h, GL.GL_RGBA, GL.GL_UNSIGNED_BYTE)
+        return np.frombuffer(data, dtype=np.uint8).reshape(h, w, 4)[::-1]
+
+    def _sync_buffers(self, scene) -> None:
+        """Upload the primitives the scene changed since the last draw (see DentitionScene.buffer_versions)."""
+        GL = self._GL
+        for prim, version in scene.buffer_versions.items():
+            if self._seen_versions.get(prim) == version:
+                continue
+            self._seen_versions[prim] = version
+            if not prim._in_context():
+                continue  # first draw: pyrender uploads everything as it is now
+            if prim is scene.markers:
+                self._upload_instances(prim)
+            else:
+                # vertex colours changed (contact faces): rebuild this primitive's buffers
+                prim.delete()
+                prim._add_to_context()
+
+    def _upload_instances(self, prim) -> None:
+        GL = self._GL
+        poses = prim._poses
+        n = len(poses)
+        capacity = self._instance_capacity.get(prim, 1)
+        if n > capacity:
+            capacity = max(n, 2 * capacity, 256)
+            padded = np.zeros((capacity, 4, 4), np.float32)
+            padded[:n] = poses
+            prim.delete()
+            prim._poses = padded  # upload at full capacity once ...
+            prim._add_to_context()
+            prim._poses = poses  # ... but draw only the live instances
+            self._instance_capacity[prim] = capacity
+            return
+        data = np.ascontiguousarray(poses.transpose(0, 2, 1))  # GL wants column-major matrices
+        GL.glBindBuffer(GL.GL_ARRAY_BUFFER, prim._buffers[1])
+        GL.glBufferSubData(GL.GL_ARRAY_BUFFER, 0, data.nbytes, data)
+        GL.glBindBuffer(GL.GL_ARRAY_BUFFER, 0)
+
+    # ------------------------------------------------------------------------------ cleanup
+    def close(self) -> None:
+        if self._platform is None:
+            return
+        self._platform.make_current()
+        self._inner.delete()
+        self._platform.delete_context()
+        self._platform = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass

@@ -1,0 +1,257 @@
+"""The drawable scene: built once from a `Dentition`, then updated per frame from a `FrameState`.
+
+Built once: one pyrender node per tooth holding ONE primitive whose vertex colours carry the
+crown (ivory) / root (pale bluish grey) split, so a tooth costs one draw call whatever its parts;
+one instanced low-poly sphere primitive for all contact markers (one draw call for up to
+thousands of markers); a camera with the fixed light rig attached to it, so every preset is lit
+the same way relative to the viewer and images are reproducible.
+
+Updated per frame (`update`): node poses, visibility of extracted teeth, the moving-tooth tint
+(a per-tooth material colour factor, a uniform: nothing re-uploaded), the marker instances and,
+optionally, the vertex colours of teeth inside contact spheres. GPU buffers are never touched
+here: changed buffers get a new version number in `buffer_versions`, and the renderer, which owns
+the GL context, uploads what changed before drawing.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+from scipy.spatial import cKDTree
+
+from orthosim.dentition import Dentition
+from orthosim.fdi import arch_of
+from orthosim.tooth import CROWN, ROOT
+
+from .cameras import VIEW_NAMES, CameraView, check_view, frame_view
+from .frame_state import FrameState
+from .gl import load_pyrender
+
+# Colours, linear RGB in [0, 1]; chosen for clinicians: ivory enamel, roots clearly paler and
+# cooler than crowns, moving teeth a distinct mint, contacts a saturated red-magenta that no
+# lit tooth surface can produce.
+CROWN_COLOR = (0.94, 0.90, 0.80)
+ROOT_COLOR = (0.70, 0.75, 0.84)
+MOVING_TINT = (0.66, 1.00, 0.80)  # multiplies the tooth's colours
+CONTACT_COLOR = (1.00, 0.04, 0.32)
+BACKGROUND = (0.10, 0.11, 0.14)  # dark slate, like the black card of intra-oral photographs
+AMBIENT = (0.22, 0.22, 0.24)
+# Fixed light rig in the camera frame (x right, y up, camera looks along -z): a key light from
+# the upper left, a weaker fill from the right and a low rim from below, each a direction the
+# light travels along.
+LIGHT_RIG = (
+    ((0.45, -0.55, -0.70), (1.00, 0.98, 0.94), 0.62),
+    ((-0.60, -0.10, -0.80), (0.90, 0.94, 1.00), 0.30),
+    ((0.00, 0.80, -0.60), (1.00, 1.00, 1.00), 0.14),
+)
+ENAMEL_ROUGHNESS = 0.5  # weak specular highlight (see shaders/mesh.frag)
+
+
+def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: bool):
+    """Vertices duplicated along the CEJ so crown and root faces get their own colour.
+
+    Normals are the full mesh's smooth vertex normals, so the shading runs on across the seam and
+    only the colour changes there. Returns positions (n, 3) float32 mm, normals (n, 3) float32,
+    colours (n, 4) float32, indices (m, 3) uint32.
+    """
+    normals = mesh.vertex_normals
+    parts = [CROWN] if hide_roots else [CROWN, ROOT]
+    pos, nrm, col, idx = [], [], [], []
+    offset = 0
+    for part in parts:
+        faces = mesh.faces[face_part == part]
+        if not len(faces):
+            continue
+        used, inverse = np.unique(faces.reshape(-1), return_inverse=True)
+        pos.append(mesh.vertices[used])
+        nrm.append(normals[used])
+        colour = CROWN_COLOR if part == CROWN else ROOT_COLOR
+        col.append(np.tile([*colour, 1.0], (len(used), 1)))
+        idx.append(inverse.reshape(-1, 3) + offset)
+        offset += len(used)
+    return (np.concatenate(pos).astype(np.float32), np.concatenate(nrm).astype(np.float32),
+            np.concatenate(col).astype(np.float32), np.concatenate(idx).astype(np.uint32))
+
+
+class _ToothDrawable:
+    """One tooth's node, primitive and the data needed to recolour it."""
+
+    def __init__(self, pyrender, fdi: int, tooth, hide_roots: bool, keep_kdtree: bool):
+        self.fdi = fdi
+        self.arch = arch_of(fdi)
+        pos, nrm, col, idx = _split_by_part(tooth.mesh, tooth.face_part, hide_roots)
+        self.base_colors = col  # (n_vertices, 4) float32
+        self.material = pyrender.MetallicRoughnessMaterial(
+            baseColorFactor=[1.0, 1.0, 1.0, 1.0], metallicFactor=0.0, roughnessFactor=ENAMEL_ROUGHNESS,
+            doubleSided=hide_roots,  # an open crown shows its inside through the cut
+        )
+        self.primitive = pyrender.Primitive(positions=pos, normals=nrm, color_0=col.copy(), indices=idx,
+                                            material=self.material)
+        self.mesh = pyrender.Mesh([self.primitive], name=f"tooth {fdi}")
+        self.node = pyrender.Node(name=f"tooth {fdi}", mesh=self.mesh, matrix=tooth.rest_pose)
+        self.kdtree = cKDTree(pos.astype(np.float64)) if keep_kdtree else None  # local frame: built once
+        # bounding sphere in the local frame, to skip teeth far from every contact
+        self.center_local = pos.mean(axis=0).astype(np.float64)
+        self.radius_local = float(np.linalg.norm(pos - self.center_local, axis=1).max())
+        self.tinted = False
+        self.painted = False  # vertex colours currently differ from base_colors
+
+
+def _unit_sphere(subdivisions: int):
+    s = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
+    return (s.vertices.astype(np.float32), s.vertex_normals.astype(np.float32), s.faces.astype(np.uint32))
+
+
+class DentitionScene:
+    """A pyrender scene of one dentition, its contact markers, the camera and the light rig."""
+
+    def __init__(self, dentition: Dentition, size: tuple[int, int] = (640, 480), *, hide_roots: bool = False,
+                 color_contact_faces: bool = False, marker_subdivisions: int = 1):
+        pyrender = load_pyrender()
+        self.dentition = dentition
+        self.size = (int(size[0]), int(size[1]))
+        self.hide_roots = hide_roots
+        self.color_contact_faces = color_contact_faces
+        self.scene = pyrender.Scene(bg_color=[*BACKGROUND, 0.0], ambient_light=AMBIENT)
+        # primitive -> version; the renderer re-uploads a primitive whose version it has not seen
+        self.buffer_versions: dict[object, int] = {}
+
+        self.teeth: dict[int, _ToothDrawable] = {}
+        for fdi in dentition.fdis:
+            d = _ToothDrawable(pyrender, fdi, dentition.teeth[fdi], hide_roots, color_contact_faces)
+            self.teeth[fdi] = d
+            self.scene.add_node(d.node)
+
+        pos, nrm, idx = _unit_sphere(marker_subdivisions)
+        self.marker_material = pyrender.MetallicRoughnessMaterial(
+            baseColorFactor=[*CONTACT_COLOR, 1.0], metallicFactor=0.0, roughnessFactor=1.0,
+            emissiveFactor=[0.35 * c for c in CONTACT_COLOR],  # stays saturated on the shadow side
+        )
+        self.markers = pyrender.Primitive(positions=pos, normals=nrm, indices=idx, material=self.marker_material,
+                                          poses=np.eye(4, dtype=np.float32)[None])
+        self.marker_mesh = pyrender.Mesh([self.markers], name="contact markers")
+        self.marker_mesh.is_visible = False
+        self.marker_node = pyrender.Node(name="contact markers", mesh=self.marker_mesh)
+        self.scene.add_node(self.marker_node)
+        self._marker_poses = np.zeros((0, 4, 4), np.float32)
+
+        self.camera = pyrender.PerspectiveCamera(yfov=1.0, aspectRatio=self.size[0] / self.size[1])
+        self.camera_node = pyrender.Node(name="camera", camera=self.camera)
+        self.scene.add_node(self.camera_node)
+        for i, (direction, colour, intensity) in enumerate(LIGHT_RIG):
+            light = pyrender.DirectionalLight(color=colour, intensity=intensity)
+            self.scene.add_node(pyrender.Node(name=f"light {i}", light=light, matrix=_look_along(direction)),
+                                parent_node=self.camera_node)
+
+        self._views: dict[str, CameraView] = {}
+        self._view: CameraView | None = None
+        self._extracted: frozenset[int] = frozenset()
+        self.state: FrameState | None = None
+        self.set_view("frontal")
+
+    # ----------------------------------------------------------------------------------- views
+    def view(self, name: str) -> CameraView:
+        """The preset `name`, framed from the rest-pose vertices of the arches it shows (cached)."""
+        check_view(name)
+        if name not in self._views:
+            from .cameras import PRESETS
+
+            arches = PRESETS[name][2]
+            pts = [self.dentition.teeth[f].world_mesh().vertices for f in self.dentition.fdis
+                   if arch_of(f) in arches]
+            self._views[name] = frame_view(name, np.concatenate(pts), self.size)
+        return self._views[name]
+
+    def set_view(self, name: str) -> CameraView:
+        v = self.view(name)
+        self._view = v
+        self.camera.yfov = v.yfov
+        self.camera.znear = v.znear
+        self.camera.zfar = v.zfar
+        self.camera.aspectRatio = v.aspect
+        self.scene.set_pose(self.camera_node, v.pose)
+        self._apply_visibility()
+        return v
+
+    @property
+    def current_view(self) -> CameraView:
+        return self._view
+
+    def _apply_visibility(self):
+        arches = self._view.arches if self._view is not None else None
+        for fdi, d in self.teeth.items():
+            d.mesh.is_visible = fdi not in self._extracted and (arches is None or d.arch in arches)
+
+    # ----------------------------------------------------------------------------------- state
+    def update(self, state: FrameState) -> None:
+        """Make the scene show `state`: poses, extracted and moving teeth, contacts."""
+        self.state = state
+        for fdi, d in self.teeth.items():
+            pose = state.poses.get(fdi)
+            if pose is not None:
+                # Node.matrix would decompose every pose into a quaternion and recompose it
+                # (tens of microseconds per tooth per frame); our poses are already valid rigid 4x4s.
+                d.node._matrix = np.asarray(pose, dtype=np.float64)
+            tint = fdi in state.moving
+            if tint != d.tinted:
+                d.material.baseColorFactor = [*MOVING_TINT, 1.0] if tint else [1.0, 1.0, 1.0, 1.0]
+                d.tinted = tint
+        if state.extracted != self._extracted:
+            self._extracted = state.extracted
+            self._apply_visibility()
+        self._update_markers(state.contact_centers, state.contact_radii)
+        if self.color_contact_faces:
+            self._paint_contact_faces(state)
+
+    def _update_markers(self, centers: np.ndarray, radii: np.ndarray) -> None:
+        n = len(radii)
+        self.marker_mesh.is_visible = n > 0
+        if n == 0:
+            return
+        poses = np.zeros((n, 4, 4), np.float32)
+        poses[:, 0, 0] = poses[:, 1, 1] = poses[:, 2, 2] = radii
+        poses[:, :3, 3] = centers
+        poses[:, 3, 3] = 1.0
+        self.markers._poses = poses  # already (n, 4, 4) float32 contiguous: skip the setter's copies
+        self.markers._bounds = None
+        self.buffer_versions[self.markers] = self.buffer_versions.get(self.markers, 0) + 1
+
+    def _paint_contact_faces(self, state: FrameState) -> None:
+        """Colour the vertices of each tooth that lie inside a contact sphere (the paper's Figure 7)."""
+        centers, radii = state.contact_centers, state.contact_radii
+        involved = {f for pair in state.contact_pairs for f in pair}
+        for fdi, d in self.teeth.items():
+            hits = None
+            if len(radii) and (not state.contact_pairs or fdi in involved) and fdi not in state.extracted:
+                pose = np.asarray(state.poses.get(fdi, self.dentition.teeth[fdi].rest_pose), float)
+                local = (centers - pose[:3, 3]) @ pose[:3, :3]
+                near = np.linalg.norm(local - d.center_local, axis=1) <= radii + d.radius_local
+                if near.any():
+                    lists = d.kdtree.query_ball_point(local[near], radii[near])
+                    found = [i for lst in lists for i in lst]
+                    if found:
+                        hits = np.unique(np.asarray(found, dtype=np.int64))
+            if hits is None and not d.painted:
+                continue
+            colors = d.base_colors.copy()
+            if hits is not None:
+                colors[hits, :3] = CONTACT_COLOR
+            d.primitive.color_0 = colors
+            d.painted = hits is not None
+            self.buffer_versions[d.primitive] = self.buffer_versions.get(d.primitive, 0) + 1
+
+
+def _look_along(direction) -> np.ndarray:
+    """Pose whose -z axis points along `direction` (pyrender lights shine along their -z)."""
+    z = -np.asarray(direction, float)
+    z /= np.linalg.norm(z)
+    helper = np.array([0.0, 1.0, 0.0]) if abs(z[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2] = x, y, z
+    return T
+
+
+__all__ = ["DentitionScene", "VIEW_NAMES", "CROWN_COLOR", "ROOT_COLOR", "MOVING_TINT", "CONTACT_COLOR", "BACKGROUND"]
