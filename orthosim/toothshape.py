@@ -21,6 +21,7 @@ from scipy.interpolate import PchipInterpolator
 from .anatomy import ToothDimensions
 from .fdi import Arch, ToothType
 
+TRUNK = 0.85  # root-trunk cross-section over the cervical one, multi-rooted teeth
 RESOLUTIONS = {"coarse": 10, "medium": 20, "smooth": 40, "fine": 64}
 
 
@@ -82,7 +83,7 @@ _PM_UPPER = ShapeRecipe(0.70, 0.88, 0.72, 0.35, 0.82, 0.72, 2.6,
                         (Cusp("buccal_cusp", 0.0, 0.55, 2.0, 0.45), Cusp("lingual_cusp", 0.0, -0.55, 1.7, 0.45)),
                         fossa_depth=0.6)
 _recipe((Arch.UPPER,), (_T.FIRST_PREMOLAR,),
-        ShapeRecipe(**{**_PM_UPPER.__dict__, "roots": (Root(0.0, 0.5, 0.6, 0.42, 1.3), Root(0.0, -0.5, 0.6, 0.42, 1.3)),
+        ShapeRecipe(**{**_PM_UPPER.__dict__, "roots": (Root(0.0, 0.5, 0.8, 0.45, 1.3), Root(0.0, -0.5, 0.8, 0.45, 1.3)),
                        "trunk": 5.0}))
 _recipe((Arch.UPPER,), (_T.SECOND_PREMOLAR,), _PM_UPPER)
 _recipe((Arch.LOWER,), (_T.FIRST_PREMOLAR,),
@@ -98,7 +99,7 @@ _UPPER_MOLAR_CUSPS = (
     Cusp("mb_cusp", 0.5, 0.55, 1.8, 0.33), Cusp("db_cusp", -0.5, 0.55, 1.6, 0.33),
     Cusp("mp_cusp", 0.45, -0.5, 2.0, 0.38), Cusp("dp_cusp", -0.5, -0.55, 1.3, 0.3),
 )
-_UPPER_MOLAR_ROOTS = (Root(0.5, 0.45, 0.38, 0.32, 1.35), Root(-0.5, 0.45, 0.36, 0.3, 1.3), Root(0.0, -0.55, 0.42, 0.38, 1.45))
+_UPPER_MOLAR_ROOTS = (Root(0.5, 0.45, 0.48, 0.45, 1.35), Root(-0.5, 0.45, 0.46, 0.42, 1.3), Root(0.0, -0.5, 0.6, 0.48, 1.45))
 _recipe((Arch.UPPER,), (_T.FIRST_MOLAR, _T.SECOND_MOLAR, _T.THIRD_MOLAR),
         ShapeRecipe(0.78, 0.86, 0.72, 0.35, 0.84, 0.78, 2.8, _UPPER_MOLAR_CUSPS, 1.0, _UPPER_MOLAR_ROOTS, 4.0))
 # Lower molars: mesiobuccal, distobuccal, distal, mesiolingual, distolingual cusps; mesial and distal roots.
@@ -107,7 +108,7 @@ _LOWER_MOLAR_CUSPS = (
     Cusp("d_cusp", -0.62, 0.3, 1.2, 0.24), Cusp("ml_cusp", 0.5, -0.55, 1.9, 0.3),
     Cusp("dl_cusp", -0.45, -0.55, 1.7, 0.3),
 )
-_LOWER_MOLAR_ROOTS = (Root(0.5, 0.0, 0.36, 0.8, 1.2), Root(-0.5, 0.0, 0.34, 0.75, 1.25))
+_LOWER_MOLAR_ROOTS = (Root(0.5, 0.0, 0.46, 0.88, 1.2), Root(-0.5, 0.0, 0.44, 0.85, 1.25))
 _recipe((Arch.LOWER,), (_T.FIRST_MOLAR,),
         ShapeRecipe(0.78, 0.86, 0.72, 0.35, 0.84, 0.78, 2.8, _LOWER_MOLAR_CUSPS, 1.0, _LOWER_MOLAR_ROOTS, 3.5))
 _recipe((Arch.LOWER,), (_T.SECOND_MOLAR, _T.THIRD_MOLAR),
@@ -208,8 +209,8 @@ def build_tooth_shape(dims: ToothDimensions, arch: Arch, ttype: ToothType, resol
 
     multi = bool(recipe.roots)
     bottom = -(recipe.trunk + 1.5) if multi else -L
-    a_prof = [(bottom, 0.62 * cerv_a if multi else 0.28 * cerv_a)]
-    b_prof = [(bottom, 0.62 * cerv_b if multi else 0.3 * cerv_b)]
+    a_prof = [(bottom, TRUNK * cerv_a if multi else 0.28 * cerv_a)]
+    b_prof = [(bottom, TRUNK * cerv_b if multi else 0.3 * cerv_b)]
     if not multi:
         a_prof.append((-0.5 * L, 0.68 * cerv_a))
         b_prof.append((-0.5 * L, 0.72 * cerv_b))
@@ -271,7 +272,7 @@ def build_tooth_shape(dims: ToothDimensions, arch: Arch, ttype: ToothType, resol
 
 def _root_mesh(root: Root, recipe: ShapeRecipe, cerv_a: float, cerv_b: float, L: float, n: int) -> trimesh.Trimesh:
     """One tapered root of a multi-rooted tooth: from inside the trunk down to its apex at -L."""
-    trunk_a, trunk_b = 0.62 * cerv_a, 0.62 * cerv_b
+    trunk_a, trunk_b = TRUNK * cerv_a, TRUNK * cerv_b
     top_y = -recipe.trunk + 0.8
     top_c = np.array([root.x * trunk_a, top_y, root.z * trunk_b])
     apex_c = np.array([root.x * trunk_a * root.spread, -L, root.z * trunk_b * root.spread])
@@ -283,7 +284,7 @@ def _root_mesh(root: Root, recipe: ShapeRecipe, cerv_a: float, cerv_b: float, L:
     rings = []
     for s in np.linspace(0.0, 1.0, n_rings + 1)[:-1]:
         c = top_c + s * (apex_c - top_c)
-        taper = 1.0 - 0.55 * s
+        taper = 1.0 - 0.45 * s
         if s > 0.8:  # rounded tip
             taper *= np.sqrt(max(0.0, 1 - ((s - 0.8) / 0.2) ** 2)) * 0.9 + 0.1
         rings.append(np.column_stack([c[0] + ra * taper * ux, np.full(m, c[1]), c[2] + rb * taper * uz]))
