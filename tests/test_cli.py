@@ -1,0 +1,62 @@
+"""The command line as a user meets it: commands listed, runs that write real output, clean errors."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def orthosim(*args, cwd=ROOT):
+    env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa"}
+    return subprocess.run([sys.executable, "-c", "from orthosim.cli import entry; entry()", *args],
+                          cwd=cwd, capture_output=True, text=True, env=env, timeout=600)
+
+
+def test_help_lists_every_command_with_one_line():
+    r = orthosim("--help")
+    assert r.returncode == 0
+    for command in ("run", "demo", "check"):
+        assert f"  {command} " in r.stdout
+
+
+def test_run_without_render_writes_metrics_of_the_initial_model(tmp_path):
+    r = orthosim("run", "cases/case1_first_premolar_extraction.toml", "--out", str(tmp_path / "o"), "--no-render")
+    assert r.returncode == 0, r.stderr
+    metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    assert metrics["extracted"] == [14, 24, 34, 44]
+    assert len(metrics["teeth"]) == 28
+    assert abs(metrics["occlusion"]["overjet_mm"] - 2.0) < 0.5
+    # the extraction spaces are bridged: the canine and second premolar become neighbours
+    pairs = [d["pair"] for d in metrics["distances"]]
+    assert [15, 13] in pairs and [23, 25] in pairs and [13, 14] not in pairs
+    assert not list((tmp_path / "o").glob(".*"))  # no temporary files left behind
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("[model]\nkind = 'parametric'\n[[loads]]\nteeth = [99]\nforce_cN = 1\n", "loads[0].teeth[0]: unknown tooth 99"),
+    ("[model\n", "not valid TOML"),
+])
+def test_bad_case_gives_one_line_error_nonzero_exit_and_no_output(tmp_path, text, expected):
+    case = tmp_path / "bad.toml"
+    case.write_text(text)
+    out = tmp_path / "o"
+    r = orthosim("run", str(case), "--out", str(out), "--no-render")
+    assert r.returncode == 2
+    assert expected in r.stderr and str(case) in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert not out.exists()
+
+
+def test_missing_case_file(tmp_path):
+    r = orthosim("check", str(tmp_path / "none.toml"))
+    assert r.returncode == 2 and "no such case file" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_bad_size_option_is_refused():
+    r = orthosim("run", "cases/normal_occlusion.toml", "--size", "big")
+    assert r.returncode == 2 and "WIDTHxHEIGHT" in r.stderr
