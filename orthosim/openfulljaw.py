@@ -8,7 +8,8 @@ is labial/buccal, and `x - c` points DISTALLY on every tooth although the datase
 mesial; so only `z` and `y` are used (the local x axis is y cross z per `orthosim.tooth`) and the
 sense of `x` found is recorded in `info`. The whole jaw is moved into the arch frame
 (`orthosim.dentition`) by ONE rigid transform, so the teeth keep their true relative positions:
-  y  normal of the plane fitted (SVD) through the crown centres, signed so upper long axes
+  y  normal of the plane fitted (SVD) through the crown centres (each the centroid of the tooth's
+     part coronal of its estimated CEJ, as every report uses), signed so upper long axes
      (apex -> crown) point to -y and lower ones to +y;
   z  in that plane, from the centroid of the crown centres toward the midpoint of the central
      incisors (the nearest-to-midline pair present on both sides), i.e. anterior;
@@ -24,6 +25,7 @@ from __future__ import annotations
 import json
 import re
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +39,7 @@ from .meshload import CEJ_RULE, MeshRepairWarning, ToothAxes, load_tooth_mesh, t
 _TOOTH_FILE = re.compile(r"^tooth_(\d+)\.stl$", re.IGNORECASE)
 
 ORIGIN_RULE = (
-    "x, z: centroid of the crown centres (json c) projected into their best-fit plane; "
+    "x, z: centroid of the crown centres projected into their best-fit plane; "
     "y = 0: mean of the teeth's occlusal-most vertices (min y upper, max y lower)"
 )
 
@@ -92,16 +94,18 @@ def load_open_full_jaw(folder: str | Path) -> Dentition:
 
     order = sorted(meshes)
     path_of = {fdi_of[u]: p for u, p in files.items()}
-    scan_to_arch = _scan_to_arch(folder, order, centre, long_axis, meshes)
-    R, t = scan_to_arch[:3, :3], scan_to_arch[:3, 3]
+    # Build each tooth in the scan frame first: its crown centre (the centroid of the part coronal
+    # of the estimated CEJ) is what the arch frame is fitted to, the same centre every report uses.
+    in_scan = {n: tooth_from_mesh(n, meshes[n], ToothAxes(long_axis=long_axis[n], labial=labial[n], point=centre[n]),
+                                  source=str(path_of[n])) for n in order}
+    crown_centre = {n: t.to_world(t.crown_center) for n, t in in_scan.items()}
+    scan_to_arch = _scan_to_arch(folder, order, crown_centre, long_axis, meshes)
+    R = scan_to_arch[:3, :3]
 
     teeth = {}
     x_sense = {"mesial": 0, "distal": 0}
     for n in order:
-        mesh = meshes[n].copy()
-        mesh.apply_transform(scan_to_arch)
-        axes = ToothAxes(long_axis=R @ long_axis[n], labial=R @ labial[n], point=R @ centre[n] + t)
-        tooth = tooth_from_mesh(n, mesh, axes, source=str(path_of[n]))
+        tooth = replace(in_scan[n], rest_pose=scan_to_arch @ in_scan[n].rest_pose)
         teeth[n] = tooth
         mesial_arch = tooth.rest_pose[:3, :3] @ tooth.mesial
         x_sense["mesial" if (R @ x_end[n]) @ mesial_arch > 0 else "distal"] += 1

@@ -88,12 +88,15 @@ def test_crown_centres_lie_in_the_occlusal_plane_orientation(jaw):
 
 def test_upper_crowns_point_down(jaw):
     dentition, _, _ = jaw
-    # Measured: 7.9-26.9 degrees; the upper incisors are proclined (~23-26 degrees) and the third
-    # molar 18 tips (~27 degrees), as real teeth do, so 30 degrees bounds "pointing down".
+    angles = {}
     for n in UPPER_PRESENT:
         long_axis = dentition.teeth[n].rest_pose[:3, :3] @ np.array([0.0, 1.0, 0.0])
-        angle = np.degrees(np.arccos(-long_axis[1]))
-        assert angle < 30.0, (n, angle)
+        angles[n] = np.degrees(np.arccos(-long_axis[1]))
+    # FDI 17 to 27: within 25 degrees of the vertical (measured: 8-23, the proclined incisors highest).
+    assert max(a for n, a in angles.items() if n != 18) < 25.0, angles
+    # The third molar 18 tips distally in this patient (measured 29 degrees; no arch frame whose
+    # occlusal plane stays within 5 degrees brings it under 26), so it gets its own, looser bound.
+    assert angles[18] < 32.0
 
 
 def test_local_frames_are_anatomical(jaw):
