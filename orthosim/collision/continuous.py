@@ -1,11 +1,11 @@
 """Detector 3, continuous sphere trees: whether, and when first, two teeth touch during a step.
 
 Motion between the step's end poses is the one defined in `motion` (linear translation, constant
-angular velocity about the local origin). All node centres are expressed in tooth a's frame at
-t = 0, where their chords are affine images of the world chords. A node pair is pruned when the
-exact minimum over [0, 1] of the chord distance |A + t B| exceeds the sum of the radii, each
-inflated by its centre's largest deviation from its chord (`motion.chord_deviation_bound`); at
-leaf pairs Eq. 2 gives the first time of contact of the inflated spheres. The least such time of
+angular velocity about the local origin). Each node centre is followed along its chord, its
+radius inflated by the centre's largest deviation from that chord (`motion.chord_deviation_bound`).
+A node pair is pruned when a lower bound of the chord distance |A + t B| over [0, 1] exceeds the
+sum of the inflated radii; at leaf pairs Eq. 2 gives the first time of contact of the inflated
+spheres. The least such time of
 a tooth pair is never later than the meshes' own first contact.
 
 `refine_time_of_contact` then optionally advances that time on the exact meshes by conservative
@@ -20,57 +20,82 @@ import numpy as np
 
 from . import exact
 from .descent import descend
-from .model import CollisionModel
+from .model import FLOAT32_MARGIN_MM, CollisionModel
 from .motion import chord_deviation_bound, interpolate_pose, max_speed, rotation_angle
 from .time_of_contact import contact_interval, min_distance_over_step
 
 
 def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, pair_idx: np.ndarray, first_only: bool = False):
-    """(pair, leaf a, leaf b, t, leave): leaf pairs that may touch in the step, Eq. 2's first time.
+    """(pair, node a, node b, t, leave): leaf pairs that may touch in the step, Eq. 2's first time.
 
     poses0, poses1: (n, 4, 4) poses at t = 0 and t = 1 in model body order; pair_idx (p, 2).
     t: (m,) in [0, 1), never later than the first contact of the leaves' contents; leave: (m,)
     when the (inflated) spheres stop overlapping along their chords.
+
+    Every node is placed at both ends by two batched matrix products (arch frame). Node pairs are
+    pruned with the swept-sphere bound: a node's chord lies in the sphere about its midpoint M of
+    radius |D| / 2 (D the chord), so min_t |A + t B| >= |M_a - M_b| - (|D_a| + |D_b|) / 2, a lower
+    bound like the paper's interval arithmetic, tested on float32 arrays as in `discrete`. Leaf
+    pairs that pass get the exact closed-form test and Eq. 2 in float64.
     """
-    ia, ib = pair_idx[:, 0], pair_idx[:, 1]
-    return swept_leaves_posed(model, pair_idx, poses0[ia], poses1[ia], poses0[ib], poses1[ib], first_only)
+    W0 = model.world_centers(poses0)
+    D = model.world_centers(poses1) - W0  # chord of every node centre
+    inflate = np.repeat(chord_deviation_bound(rotation_angle(poses0, poses1), 1.0), model.width)
+    R = model.radii + inflate * model.rho  # radius grown by the node centre's largest chord deviation
+    X, Y, Z = (W0 + 0.5 * D).T.astype(np.float32)
+    Rs = (R + 0.5 * np.linalg.norm(D, axis=1) + FLOAT32_MARGIN_MM).astype(np.float32)
+
+    def may_touch(pair, na, nb):
+        dx = X[na] - X[nb]
+        dy = Y[na] - Y[nb]
+        dz = Z[na] - Z[nb]
+        s = Rs[na] + Rs[nb]
+        return dx * dx + dy * dy + dz * dz <= s * s
+
+    def chords(pair, na, nb):
+        return W0[na] - W0[nb], D[na] - D[nb], R[na] + R[nb]
+
+    return _sweep(model, pair_idx, chords, first_only, may_touch)
 
 
 def swept_leaves_posed(model: CollisionModel, pair_idx: np.ndarray, Ta0, Ta1, Tb0, Tb1, first_only: bool = False):
-    """As `swept_leaves`, with each pair's own end poses (p, 4, 4) for its tooth a and tooth b."""
+    """As `swept_leaves`, with each pair's own end poses (p, 4, 4) for its tooth a and tooth b.
+
+    All chords are taken in tooth a's frame at t = 0 (an affine image of the arch-frame chords).
+    """
     inv_a0 = np.linalg.inv(Ta0)
     M_a1 = inv_a0 @ Ta1  # a at t = 1, seen from a at t = 0
-    M_b = np.concatenate([inv_a0 @ Tb0, inv_a0 @ Tb1], axis=1)  # (p, 8, 4): b at 0, 1
-    Rb = np.concatenate([M_b[:, 0:3, :3], M_b[:, 4:7, :3]], axis=1)  # (p, 6, 3)
-    tb = np.concatenate([M_b[:, 0:3, 3], M_b[:, 4:7, 3]], axis=1)  # (p, 6)
+    M_b0 = inv_a0 @ Tb0
+    M_b1 = inv_a0 @ Tb1
     wa = chord_deviation_bound(rotation_angle(Ta0, Ta1), 1.0)  # mm of deviation per mm of |centre|
     wb = chord_deviation_bound(rotation_angle(Tb0, Tb1), 1.0)
-    last = model.depth - 1
-    toc = {}
+    C = model.centers.reshape(-1, 3)
 
-    def keep(level, pair, na, nb):
-        ca = model.centers[level][na]
+    def chords(pair, na, nb):
+        ca, cb = C[na], C[nb]
         ca1 = np.einsum("fij,fj->fi", M_a1[pair, :3, :3], ca) + M_a1[pair, :3, 3]
-        cb = np.einsum("fij,fj->fi", Rb[pair], model.centers[level][nb]) + tb[pair]
-        A = ca - cb[:, :3]
-        B = (ca1 - ca) - (cb[:, 3:] - cb[:, :3])
-        R = (model.radii[level][na] + model.radii[level][nb]
-             + wa[pair] * model.rho[level][na] + wb[pair] * model.rho[level][nb])
-        if level < last:
-            return min_distance_over_step(A, B) <= R
-        enter, leave = contact_interval(A, B, R)
-        ok = ~np.isnan(enter)
-        toc["t"], toc["leave"] = enter[ok], leave[ok]
-        return ok
+        cb0 = np.einsum("fij,fj->fi", M_b0[pair, :3, :3], cb) + M_b0[pair, :3, 3]
+        cb1 = np.einsum("fij,fj->fi", M_b1[pair, :3, :3], cb) + M_b1[pair, :3, 3]
+        R = model.radii[na] + model.radii[nb] + wa[pair] * model.rho[na] + wb[pair] * model.rho[nb]
+        return ca - cb0, (ca1 - ca) - (cb1 - cb0), R
 
-    pair, la, lb = descend(model, pair_idx, keep, first_only=False)
-    t = toc.get("t", np.zeros(0)) if len(pair) else np.zeros(0)
-    leave = toc.get("leave", np.zeros(0)) if len(pair) else np.zeros(0)
-    if first_only and len(pair):
-        order = np.lexsort((t, pair))
-        pair, la, lb, t, leave = pair[order], la[order], lb[order], t[order], leave[order]
-        _, first = np.unique(pair, return_index=True)
-        pair, la, lb, t, leave = pair[first], la[first], lb[first], t[first], leave[first]
+    return _sweep(model, pair_idx, chords, first_only, track_pair=True)
+
+
+def _sweep(model, pair_idx, chords, first_only, may_touch=None, track_pair=False):
+    if may_touch is None:
+        def may_touch(pair, na, nb):
+            A, B, R = chords(pair, na, nb)
+            return min_distance_over_step(A, B) <= R
+
+    def at_leaves(pair, na, nb):
+        enter, leave = contact_interval(*chords(pair, na, nb))
+        ok = ~np.isnan(enter)
+        return ok, {"t": enter, "leave": leave}
+
+    pair, la, lb, payload = descend(model, pair_idx, may_touch, at_leaves, first_only, track_pair)
+    t = payload.get("t", np.zeros(0))
+    leave = payload.get("leave", np.zeros(0))
     return pair, la, lb, t, leave
 
 

@@ -1,10 +1,14 @@
 """Simultaneous descent of two sphere trees, for every candidate pair of a step at once.
 
-The frontier is three parallel arrays (pair, node of tree a, node of tree b), global node indices
-of one level (see `CollisionModel`). Each level keeps the node pairs a test accepts, then replaces
-every kept node pair by the product of their children: children are contiguous in the next level,
-so the expansion is arithmetic on (start, count) arrays. Both trees descend together, one level
-per round, so a depth-4 query is four rounds of numpy work whatever the number of pairs.
+The frontier is two parallel arrays (node of tree a, node of tree b) of flat node indices (see
+`CollisionModel`), plus the tooth pair of each entry when a body can appear in several pairs with
+different poses (`track_pair`). Each round tests every frontier entry with numpy, keeps the node
+pairs that may hold a contact, sets aside leaf-leaf pairs as results, and replaces every other
+kept entry by the children of its larger sphere (or of the one that is not a leaf) against the
+other node: the classic rule that descends the node whose sphere is bigger (it tests about a
+third as many node pairs here as expanding both nodes at once). Children are contiguous, so
+expansion is arithmetic on (start, count) arrays; a round costs a fixed number of numpy calls
+whatever the number of tooth pairs, and a depth-d query takes at most 2 (d - 1) + 1 rounds.
 """
 
 from __future__ import annotations
@@ -16,36 +20,88 @@ import numpy as np
 from .model import CollisionModel
 
 
-def expand_children(model: CollisionModel, level: int, pair: np.ndarray, na: np.ndarray, nb: np.ndarray):
-    """Every (child of na, child of nb) of the given level-`level` node pairs, with their pair index."""
-    sa, ka = model.child_start[level][na], model.child_count[level][na]
-    sb, kb = model.child_start[level][nb], model.child_count[level][nb]
-    m = ka * kb
-    total = int(m.sum())
-    rep = np.repeat(np.arange(len(m)), m)
-    j = np.arange(total) - np.repeat(np.cumsum(m) - m, m)
-    kbr = kb[rep]
-    return pair[rep], sa[rep] + j // kbr, sb[rep] + j % kbr
+def _expand(model: CollisionModel, parent, other, count, pair):
+    """Entries (child of parent, other[, pair]) for every child of each parent."""
+    total = int(count.sum())
+    rep = np.repeat(np.arange(len(count)), count)
+    j = np.arange(total) - np.repeat(np.cumsum(count) - count, count)
+    return model.child_start[parent][rep] + j, other[rep], (pair[rep] if pair is not None else None)
 
 
-def descend(model: CollisionModel, pair_idx: np.ndarray, keep: Callable, first_only: bool = False):
-    """Run the descent; returns (pair, leaf a, leaf b) global leaf pairs every level's test kept.
+def descend(model: CollisionModel, pair_idx: np.ndarray, may_touch: Callable, at_leaves: Callable | None = None,
+            first_only: bool = False, track_pair: bool = False):
+    """Run the descent; returns (pair, leaf a, leaf b, payload) of every accepted leaf pair.
 
-    pair_idx: (p, 2) body indices. keep(level, pair, na, nb) -> (f,) bool says which node pairs of
-    a level may hold a contact (for leaves: which do). first_only keeps one leaf pair per pair.
+    pair_idx: (p, 2) body indices. may_touch(pair, na, nb) -> (f,) bool: which node pairs may hold a
+    contact (flat node indices; pair is None unless track_pair). at_leaves(pair, na, nb) -> (ok (f,)
+    bool, payload dict of (f,) arrays): a final test of leaf pairs that passed may_touch (None:
+    accept them). first_only stops a tooth pair's descent at its first accepted leaf pair (the
+    result then holds one per pair, the least payload["t"] when there is one). Without
+    track_pair, each body pair must appear at most once in pair_idx.
     """
     p = len(pair_idx)
-    pair = np.arange(p, dtype=np.int64)
-    na = model.start[0][pair_idx[:, 0]]
-    nb = model.start[0][pair_idx[:, 1]]
-    last = model.depth - 1
-    for level in range(model.depth):
-        ok = keep(level, pair, na, nb)
-        pair, na, nb = pair[ok], na[ok], nb[ok]
-        if level == last or len(pair) == 0:
-            break
-        pair, na, nb = expand_children(model, level, pair, na, nb)
+    na, nb = model.roots(pair_idx[:, 0]), model.roots(pair_idx[:, 1])
+    n = len(model.bodies)
+    if not track_pair and len(np.unique(pair_idx[:, 0] * n + pair_idx[:, 1])) < p:
+        track_pair = True  # a body pair listed twice: entries must carry their pair
+    if track_pair:
+        pair = np.arange(p, dtype=np.int64)
+        lookup = None
+    else:
+        pair = None
+        lookup = np.full(n * n, -1, np.int64)
+        lookup[pair_idx[:, 0] * n + pair_idx[:, 1]] = np.arange(p)
+
+    def pair_of(na, nb):
+        return pair if track_pair else lookup[(na // model.width) * len(model.bodies) + nb // model.width]
+
+    found = np.zeros(p, bool)
+    out_pair, out_a, out_b, payloads = [], [], [], []
+    while len(na):
+        keep = np.flatnonzero(may_touch(pair, na, nb))
+        na, nb = na[keep], nb[keep]
+        if track_pair:
+            pair = pair[keep]
+        ka, kb = model.child_count[na], model.child_count[nb]
+        leaf = (ka | kb) == 0
+        if leaf.any():
+            li = np.flatnonzero(leaf)
+            la, lb = na[li], nb[li]
+            lp = pair[li] if track_pair else None
+            if at_leaves is not None:
+                ok, payload = at_leaves(lp, la, lb)
+                la, lb = la[ok], lb[ok]
+                lp = lp[ok] if track_pair else None
+                payloads.append({k: v[ok] for k, v in payload.items()})
+            lp = lp if track_pair else pair_of(la, lb)
+            out_pair.append(lp)
+            out_a.append(la)
+            out_b.append(lb)
+            found[lp] = True
+            inner = ~leaf
+            if first_only:
+                inner &= ~found[pair if track_pair else pair_of(na, nb)]
+            ii = np.flatnonzero(inner)
+            na, nb, ka, kb = na[ii], nb[ii], ka[ii], kb[ii]
+            if track_pair:
+                pair = pair[ii]
+        split_a = (ka > 0) & ((kb == 0) | (model.radii[na] >= model.radii[nb]))
+        ia, ib = np.flatnonzero(split_a), np.flatnonzero(~split_a)
+        ca, oa, pa = _expand(model, na[ia], nb[ia], ka[ia], pair[ia] if track_pair else None)
+        cb, ob, pb = _expand(model, nb[ib], na[ib], kb[ib], pair[ib] if track_pair else None)
+        na = np.concatenate([ca, ob])
+        nb = np.concatenate([oa, cb])
+        if track_pair:
+            pair = np.concatenate([pa, pb])
+    if not out_pair:
+        empty = np.zeros(0, np.int64)
+        return empty, empty, empty, {}
+    pair, la, lb = np.concatenate(out_pair), np.concatenate(out_a), np.concatenate(out_b)
+    payload = {k: np.concatenate([d[k] for d in payloads]) for k in payloads[0]} if payloads else {}
     if first_only and len(pair):
-        _, first = np.unique(pair, return_index=True)
-        pair, na, nb = pair[first], na[first], nb[first]
-    return pair, na, nb
+        key = payload.get("t")
+        order = np.lexsort((key, pair)) if key is not None else np.argsort(pair, kind="stable")
+        first = order[np.unique(pair[order], return_index=True)[1]]
+        pair, la, lb = pair[first], la[first], lb[first]
+        payload = {k: v[first] for k, v in payload.items()}
+    return pair, la, lb, payload

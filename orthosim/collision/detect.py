@@ -30,8 +30,8 @@ def default_pairs(model: CollisionModel, poses: np.ndarray | None = None, absent
     if all(fdi_mod.is_fdi(k) for k in keys):
         return candidate_pairs(keys, absent)
     P = np.stack([b.rest_pose for b in model.bodies]) if poses is None else poses
-    c = np.einsum("nij,nj->ni", P[:, :3, :3], model.centers[0]) + P[:, :3, 3]
-    idx = sweep_and_prune(c, model.radii[0])
+    c = np.einsum("nij,nj->ni", P[:, :3, :3], model.centers[:, 0]) + P[:, :3, 3]
+    idx = sweep_and_prune(c, model.radii[model.roots(np.arange(len(keys)))])
     return [(keys[i], keys[j]) for i, j in idx]
 
 
@@ -61,10 +61,11 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
         return _exact_step(model, P1, pairs_arr, pair_idx, request)
     first_only = not request.all_leaf_pairs
     if detector == "discrete":
-        pair, la, lb = overlapping_leaves(model, P1, pair_idx, first_only)
+        W = model.world_centers(P1)
+        pair, la, lb = overlapping_leaves(model, P1, pair_idx, first_only, world=W)
         touching = np.zeros(p, bool)
         touching[pair] = True
-        return StepResult("discrete", pairs_arr, touching, nan, **_leaf_arrays(model, pair_idx, pair, la, lb, P1, P1))
+        return StepResult("discrete", pairs_arr, touching, nan, **_leaf_arrays(model, pair_idx, pair, la, lb, P1, P1, W=W))
     # continuous
     pair, la, lb, t, leave = swept_leaves(model, P0, P1, pair_idx, first_only)
     toc = nan.copy()
@@ -88,19 +89,25 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
     return StepResult("continuous", pairs_arr, touching, toc, **_leaf_arrays(model, pair_idx, pair, la, lb, ta, tb, per_pair=True))
 
 
-def _leaf_arrays(model, pair_idx, pair, la, lb, Pa, Pb, per_pair=False):
+def _leaf_arrays(model, pair_idx, pair, la, lb, Pa, Pb, per_pair=False, W=None):
+    """Leaf-pair arrays of a StepResult from flat leaf nodes; Pa, Pb are per-body poses, or per
+    tooth pair (per_pair) when each pair is drawn at its own time; W: world centres if known."""
     ia, ib = pair_idx[pair, 0], pair_idx[pair, 1]
-    A = Pa[pair] if per_pair else Pa[ia]
-    B = Pb[pair] if per_pair else Pb[ib]
-    ca = np.einsum("mij,mj->mi", A[:, :3, :3], model.centers[-1][la]) + A[:, :3, 3]
-    cb = np.einsum("mij,mj->mi", B[:, :3, :3], model.centers[-1][lb]) + B[:, :3, 3]
+    if W is not None:
+        ca, cb = W[la], W[lb]
+    else:
+        A = Pa[pair] if per_pair else Pa[ia]
+        B = Pb[pair] if per_pair else Pb[ib]
+        C = model.centers.reshape(-1, 3)
+        ca = np.einsum("mij,mj->mi", A[:, :3, :3], C[la]) + A[:, :3, 3]
+        cb = np.einsum("mij,mj->mi", B[:, :3, :3], C[lb]) + B[:, :3, 3]
     return dict(
         pair_of_leaf=pair.astype(np.int64),
-        leaf_pairs=np.stack([model.leaf_local(ia, la), model.leaf_local(ib, lb)], axis=1).astype(np.int64).reshape(-1, 2),
+        leaf_pairs=np.stack([model.leaf_index[la], model.leaf_index[lb]], axis=1).astype(np.int64).reshape(-1, 2),
         centers_a=ca.reshape(-1, 3),
         centers_b=cb.reshape(-1, 3),
-        radii_a=model.radii[-1][la],
-        radii_b=model.radii[-1][lb],
+        radii_a=model.radii[la],
+        radii_b=model.radii[lb],
     )
 
 

@@ -1,8 +1,10 @@
 """Detector 2, discrete sphere trees: every overlapping leaf pair of every candidate pair at one pose.
 
-Tooth b's nodes are moved into tooth a's local frame by the pair's relative pose, so each level
-costs one small matrix product per surviving node pair. Overlap is Eq. 1 on spheres:
-|c1 - c2| <= r1 + r2. Because every tree is conservative (each face lies inside its leaf and all
+All node centres of every tooth are placed in the arch frame by one batched matrix product; the
+descent (`descent`) then only gathers and compares, on float32 coordinate arrays (one per axis:
+gathers from contiguous 1-D arrays are several times faster than from (n, 3) rows). Overlap is
+Eq. 1 on spheres: |c1 - c2| <= r1 + r2 + FLOAT32_MARGIN_MM; the margin (far below any mesh
+resolution) absorbs float32 rounding so the test stays conservative. Because every tree is conservative (each face lies inside its leaf and all
 the leaf's ancestors), two meshes that intersect always have an overlapping leaf pair here.
 """
 
@@ -14,25 +16,41 @@ from .descent import descend
 from .model import CollisionModel
 
 
-def overlapping_leaves(model: CollisionModel, poses: np.ndarray, pair_idx: np.ndarray, first_only: bool = False):
-    """(pair, leaf a, leaf b): global leaf indices of every overlapping leaf pair.
+def overlapping_leaves(model: CollisionModel, poses: np.ndarray, pair_idx: np.ndarray, first_only: bool = False,
+                       world: np.ndarray | None = None):
+    """(pair, node a, node b): flat node indices of every overlapping leaf pair.
 
-    poses: (n, 4, 4) local -> arch frame in model body order; pair_idx: (p, 2) body indices.
+    poses: (n, 4, 4) local -> arch frame in model body order; pair_idx: (p, 2) body indices;
+    world: `model.world_centers(poses)` when the caller has it already.
     """
-    return overlapping_leaves_posed(model, pair_idx, poses[pair_idx[:, 0]], poses[pair_idx[:, 1]], first_only)
+    X, Y, Z = (model.world_centers(poses) if world is None else world).T.astype(np.float32)
+    r = model.radii32
+
+    def may_touch(pair, na, nb):
+        dx = X[na] - X[nb]
+        dy = Y[na] - Y[nb]
+        dz = Z[na] - Z[nb]
+        s = r[na] + r[nb]
+        return dx * dx + dy * dy + dz * dz <= s * s
+
+    pair, la, lb, _ = descend(model, pair_idx, may_touch, first_only=first_only)
+    return pair, la, lb
 
 
 def overlapping_leaves_posed(model: CollisionModel, pair_idx: np.ndarray, Ta: np.ndarray, Tb: np.ndarray, first_only: bool = False):
     """As `overlapping_leaves`, with each pair's own poses Ta, Tb (p, 4, 4): many poses of the same
-    teeth in one call (the accuracy study tests thousands of relative poses at once)."""
+    teeth in one call (the accuracy study tests thousands of relative poses at once). Tooth b's
+    nodes are moved into tooth a's frame per node pair."""
     Ra_T = np.transpose(Ta[:, :3, :3], (0, 2, 1))
     R_ab = Ra_T @ Tb[:, :3, :3]  # b's local frame -> a's local frame
     t_ab = np.einsum("pij,pj->pi", Ra_T, Tb[:, :3, 3] - Ta[:, :3, 3])
+    C = model.centers.reshape(-1, 3)
+    r = model.radii
 
-    def keep(level, pair, na, nb):
-        cb = np.einsum("fij,fj->fi", R_ab[pair], model.centers[level][nb]) + t_ab[pair]
-        d = model.centers[level][na] - cb
-        r = model.radii[level][na] + model.radii[level][nb]
-        return np.einsum("ij,ij->i", d, d) <= r * r
+    def may_touch(pair, na, nb):
+        d = C[na] - (np.einsum("fij,fj->fi", R_ab[pair], C[nb]) + t_ab[pair])
+        s = r[na] + r[nb]
+        return np.einsum("ij,ij->i", d, d) <= s * s
 
-    return descend(model, pair_idx, keep, first_only)
+    pair, la, lb, _ = descend(model, pair_idx, may_touch, first_only=first_only, track_pair=True)
+    return pair, la, lb

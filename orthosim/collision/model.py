@@ -18,6 +18,11 @@ from ..spheretree.tree import SphereTree
 from .contract import CollisionError
 
 
+# mm added to radii in float32 tests: float32 rounding of arch-frame coordinates (|x| < 100 mm)
+# is below 1e-5 mm, so this keeps every test conservative.
+FLOAT32_MARGIN_MM = 1e-4
+
+
 @dataclass(frozen=True, eq=False)
 class Body:
     """One rigid body of the collision model (a tooth): local mesh, sphere tree, rest pose."""
@@ -32,56 +37,71 @@ class Body:
 class CollisionModel:
     """Sphere trees, bounding circles and exact meshes of every body, built once.
 
-    Global level arrays (k = 0 .. depth-1):
-      centers[k] (N_k, 3) mm local frame of the owning body, radii[k] (N_k,), rho[k] (N_k,) mm =
-      |centre| (distance from the body's local origin, for the rotation bound), owner[k] (N_k,)
-      body index, child_start[k] / child_count[k] (N_k,) global index range of the children in
-      level k+1, start[k] (n_bodies + 1,) first global node of each body.
+    The trees are flattened body-major into padded arrays, so one batched matrix product places
+    every node of every tooth: node `f = body * width + j`, j the node's position in its own tree
+    counted level by level from the root (root j = 0, leaves last). Padding slots are never
+    reached by a descent.
+      centers (n_bodies, width, 3) mm, local frame of the body;
+      radii, rho (n_bodies * width,) mm: radius, and |centre| (distance from the local origin,
+        for the rotation bound);
+      child_start, child_count (n_bodies * width,): flat index range of a node's children
+        (count 0 at leaves);
+      leaf_index (n_bodies * width,): index of a leaf in its tree's leaf level, -1 for inner nodes.
     """
 
     bodies: list[Body]
-    centers: list[np.ndarray] = field(init=False)
-    radii: list[np.ndarray] = field(init=False)
-    rho: list[np.ndarray] = field(init=False)
-    child_start: list[np.ndarray] = field(init=False)
-    child_count: list[np.ndarray] = field(init=False)
-    start: list[np.ndarray] = field(init=False)
+    centers: np.ndarray = field(init=False)
+    radii: np.ndarray = field(init=False)
+    rho: np.ndarray = field(init=False)
+    child_start: np.ndarray = field(init=False)
+    child_count: np.ndarray = field(init=False)
+    leaf_index: np.ndarray = field(init=False)
+    width: int = field(init=False)
     index: dict[int, int] = field(init=False)
 
     def __post_init__(self):
         if not self.bodies:
             raise CollisionError(None, "collision model", "no teeth given", "pass at least two teeth")
-        depths = {b.tree.depth for b in self.bodies}
-        if len(depths) != 1:
-            raise CollisionError(
-                None, "sphere trees", f"trees of different depths {sorted(depths)}", "build every tree with the same depth"
-            )
-        depth = depths.pop()
         self.index = {b.key: i for i, b in enumerate(self.bodies)}
-        self.centers, self.radii, self.rho, self.start = [], [], [], []
-        for k in range(depth):
-            counts = np.array([len(b.tree.radii[k]) for b in self.bodies])
-            self.start.append(np.concatenate([[0], np.cumsum(counts)]).astype(np.int64))
-            c = np.concatenate([b.tree.centers[k] for b in self.bodies]).astype(float)
-            self.centers.append(np.ascontiguousarray(c))
-            self.radii.append(np.concatenate([b.tree.radii[k] for b in self.bodies]).astype(float))
-            self.rho.append(np.linalg.norm(c, axis=1))
-        self.child_start, self.child_count = [], []
-        for k in range(depth - 1):
-            starts, counts = [], []
-            for i, b in enumerate(self.bodies):
-                off = b.tree.child_offsets(k + 1)
-                starts.append(off[:-1] + self.start[k + 1][i])
-                counts.append(np.diff(off))
-            self.child_start.append(np.concatenate(starts).astype(np.int64))
-            self.child_count.append(np.concatenate(counts).astype(np.int64))
+        sizes = [sum(len(r) for r in b.tree.radii) for b in self.bodies]
+        n, w = len(self.bodies), max(sizes)
+        self.width = w
+        self.centers = np.zeros((n, w, 3))
+        self.radii = np.zeros(n * w)
+        self.child_start = np.zeros(n * w, np.int64)
+        self.child_count = np.zeros(n * w, np.int64)
+        self.leaf_index = np.full(n * w, -1, np.int64)
+        for i, b in enumerate(self.bodies):
+            tree = b.tree
+            level_start = np.concatenate([[0], np.cumsum([len(r) for r in tree.radii])])
+            base = i * w
+            self.centers[i, : sizes[i]] = np.concatenate(tree.centers)
+            self.radii[base : base + sizes[i]] = np.concatenate(tree.radii)
+            for k in range(tree.depth - 1):
+                off = tree.child_offsets(k + 1)
+                sl = slice(base + level_start[k], base + level_start[k + 1])
+                self.child_start[sl] = base + level_start[k + 1] + off[:-1]
+                self.child_count[sl] = np.diff(off)
+            self.leaf_index[base + level_start[-2] : base + level_start[-1]] = np.arange(tree.n_leaves)
+        self.rho = np.linalg.norm(self.centers, axis=2).reshape(-1)
+        self.radii32 = (self.radii + FLOAT32_MARGIN_MM).astype(np.float32)
         self._circle = _circle_data(self.bodies)
         self.rho_max = np.array([np.linalg.norm(b.mesh.vertices, axis=1).max() for b in self.bodies])
         self._fcl: dict[int, object] = {}
 
+    def roots(self, body_idx: np.ndarray) -> np.ndarray:
+        """Flat node index of the root of each body."""
+        return np.asarray(body_idx, np.int64) * self.width
+
+    def world_centers(self, poses: np.ndarray) -> np.ndarray:
+        """(n_bodies * width, 3) mm: every node centre in the arch frame under poses (n, 4, 4)."""
+        W = self.centers @ np.transpose(poses[:, :3, :3], (0, 2, 1)) + poses[:, None, :3, 3]
+        return W.reshape(-1, 3)
+
     @property
     def depth(self) -> int:
-        return len(self.centers)
+        """Levels of the deepest tree."""
+        return max(b.tree.depth for b in self.bodies)
 
     @property
     def keys(self) -> list[int]:
@@ -109,10 +129,6 @@ class CollisionModel:
             if i is not None:
                 out[i] = T
         return out
-
-    def leaf_local(self, body_idx: np.ndarray, global_leaf: np.ndarray) -> np.ndarray:
-        """Leaf index within its own tree of global leaf indices."""
-        return global_leaf - self.start[-1][body_idx]
 
     def fcl_object(self, i: int):
         """The body's python-fcl BVH collision object (built on first use, then kept)."""
