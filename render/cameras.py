@@ -33,6 +33,8 @@ PRESETS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float],
     "mandibular_occlusal": ((0, -1, 0), (0, 0, -1), frozenset({Arch.LOWER})),
 }
 VIEW_NAMES: tuple[str, ...] = tuple(PRESETS)
+ALIASES = {"maxillary": "maxillary_occlusal", "mandibular": "mandibular_occlusal", "upper_occlusal": "maxillary_occlusal",
+           "lower_occlusal": "mandibular_occlusal", "right": "right_buccal", "left": "left_buccal", "front": "frontal"}
 
 YFOV = np.radians(24.0)  # narrow, like a clinical macro lens: little perspective distortion
 MARGIN = 1.10  # frame 10 % wider than the bounds so that moving teeth stay in the picture
@@ -65,6 +67,8 @@ class CameraView:
 
 
 def check_view(name: str) -> str:
+    """The preset's canonical name (accepting the short aliases), or a one-line ViewError."""
+    name = ALIASES.get(name, name)
     if name not in PRESETS:
         raise ViewError("--view", name, "is not a camera preset", f"use one of {', '.join(VIEW_NAMES)}")
     return name
@@ -76,7 +80,7 @@ def frame_view(name: str, points: np.ndarray, size: tuple[int, int]) -> CameraVi
     The distance is the smallest at which every point lies inside the field of view, horizontally
     and vertically, enlarged by MARGIN; near and far planes hug the points' depth range.
     """
-    check_view(name)
+    name = check_view(name)
     forward, up, arches = PRESETS[name]
     forward = np.asarray(forward, float)
     z = -forward  # camera looks along its -z

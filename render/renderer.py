@@ -65,6 +65,25 @@ def _lean_renderer_class(pyrender, GL):
                 self._locations[key] = loc
             return loc
 
+        def _draw_sprites(self, sprites, VP) -> None:
+            program = self._program_cache.get_program("marker.vert", "marker.frag",
+                                                      defines={"TEXCOORD_0_LOC": 1, "INST_M_LOC": 2})
+            if not program._in_context():
+                program._add_to_context()
+            program._bind()
+            GL.glEnable(GL.GL_PROGRAM_POINT_SIZE)
+            GL.glUniformMatrix4fv(self._loc(program, "V"), 1, GL.GL_FALSE, VP[0])
+            GL.glUniformMatrix4fv(self._loc(program, "P"), 1, GL.GL_FALSE, VP[1])
+            GL.glUniform1f(self._loc(program, "viewport_height"), float(self.viewport_height))
+            for primitive, M in sprites:
+                material = primitive.material
+                GL.glUniformMatrix4fv(self._loc(program, "M"), 1, GL.GL_FALSE, M)
+                GL.glUniform4fv(self._loc(program, "marker_color"), 1, np.asarray(material.baseColorFactor, np.float32))
+                GL.glUniform3fv(self._loc(program, "marker_emissive"), 1, np.asarray(material.emissiveFactor, np.float32))
+                GL.glBindVertexArray(primitive._vaid)
+                GL.glDrawArraysInstanced(GL.GL_POINTS, 0, len(primitive.positions), 1)
+            GL.glDisable(GL.GL_PROGRAM_POINT_SIZE)
+
         def _forward_pass(self, scene, flags, seg_node_map=None):
             self._configure_forward_pass_viewport(flags)
             GL.glClearColor(*scene.bg_color)
@@ -89,10 +108,14 @@ def _lean_renderer_class(pyrender, GL):
                     pose = scene.get_pose(node)
                     nodes.append((float(np.sum((pose[:3, 3] - cam_pos) ** 2)), id(node), node, pose))
             nodes.sort(key=lambda item: item[:2])
+            sprites = []
             for _, _, node, pose in nodes:
                 mesh = node.mesh
                 M = np.ascontiguousarray(pose.T, dtype=np.float32)
                 for primitive in mesh.primitives:
+                    if primitive.mode == pyrender.GLTF.POINTS:
+                        sprites.append((primitive, M))  # after the opaque surfaces they sit on
+                        continue
                     program = self._program_for(primitive, len(lights))
                     if program is not bound_program:
                         program._bind()
@@ -124,9 +147,10 @@ def _lean_renderer_class(pyrender, GL):
                     n_instances = 1 if primitive.poses is None else len(primitive.poses)
                     GL.glDrawElementsInstanced(primitive.mode, primitive.indices.size, GL.GL_UNSIGNED_INT,
                                                None, n_instances)
+            if sprites:
+                self._draw_sprites(sprites, VP)
             GL.glBindVertexArray(0)
-            if bound_program is not None:
-                bound_program._unbind()
+            GL.glUseProgram(0)
             GL.glFlush()
             if flags & pyrender.RenderFlags.OFFSCREEN:
                 return self._read_main_framebuffer(scene, flags)
@@ -231,29 +255,47 @@ class Renderer:
             if not prim._in_context():
                 continue  # first draw: pyrender uploads everything as it is now
             if prim is scene.markers:
-                self._upload_instances(prim)
+                self._upload_markers(prim)
             else:
                 # vertex colours changed (contact faces): rebuild this primitive's buffers
                 prim.delete()
                 prim._add_to_context()
 
-    def _upload_instances(self, prim) -> None:
+    def _upload_markers(self, prim) -> None:
+        """Copy the marker arrays into the GL buffer, growing it (by doubling) only when too small."""
         GL = self._GL
-        poses = prim._poses
-        n = len(poses)
+        sprite = prim.mode == self._pyrender.GLTF.POINTS
+        if sprite:
+            live = (prim._positions, prim._texcoord_0)
+            n = len(live[0])
+            data = np.hstack(live).astype(np.float32, copy=False)  # pyrender's interleaved layout
+            buffer = prim._buffers[0]
+        else:
+            live = prim._poses
+            n = len(live)
+            data = live.transpose(0, 2, 1)  # GL wants column-major matrices
+            buffer = prim._buffers[1]
         capacity = self._instance_capacity.get(prim, 1)
         if n > capacity:
             capacity = max(n, 2 * capacity, 256)
-            padded = np.zeros((capacity, 4, 4), np.float32)
-            padded[:n] = poses
             prim.delete()
-            prim._poses = padded  # upload at full capacity once ...
-            prim._add_to_context()
-            prim._poses = poses  # ... but draw only the live instances
+            # allocate at full capacity once, but draw only the live markers
+            if sprite:
+                prim._positions = np.zeros((capacity, 3), np.float32)
+                prim._texcoord_0 = np.zeros((capacity, 2), np.float32)
+                prim._positions[:n], prim._texcoord_0[:n] = live
+                prim._add_to_context()
+                prim._positions, prim._texcoord_0 = live
+            else:
+                padded = np.zeros((capacity, 4, 4), np.float32)
+                padded[:n] = live
+                prim._poses = padded
+                prim._add_to_context()
+                prim._poses = live
             self._instance_capacity[prim] = capacity
             return
-        data = np.ascontiguousarray(poses.transpose(0, 2, 1))  # GL wants column-major matrices
-        GL.glBindBuffer(GL.GL_ARRAY_BUFFER, prim._buffers[1])
+        data = np.ascontiguousarray(data, dtype=np.float32)
+        GL.glBindBuffer(GL.GL_ARRAY_BUFFER, buffer)
         GL.glBufferSubData(GL.GL_ARRAY_BUFFER, 0, data.nbytes, data)
         GL.glBindBuffer(GL.GL_ARRAY_BUFFER, 0)
 

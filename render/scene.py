@@ -2,8 +2,8 @@
 
 Built once: one pyrender node per tooth holding ONE primitive whose vertex colours carry the
 crown (ivory) / root (pale bluish grey) split, so a tooth costs one draw call whatever its parts;
-one instanced low-poly sphere primitive for all contact markers (one draw call for up to
-thousands of markers); a camera with the fixed light rig attached to it, so every preset is lit
+one primitive for all contact markers (one draw call for up to thousands: a point sprite per
+sphere, or an instanced low-poly sphere); a camera with the fixed light rig attached to it, so every preset is lit
 the same way relative to the viewer and images are reproducible.
 
 Updated per frame (`update`): node poses, visibility of extracted teeth, the moving-tooth tint
@@ -106,7 +106,9 @@ class DentitionScene:
     """A pyrender scene of one dentition, its contact markers, the camera and the light rig."""
 
     def __init__(self, dentition: Dentition, size: tuple[int, int] = (640, 480), *, hide_roots: bool = False,
-                 color_contact_faces: bool = False, marker_subdivisions: int = 1):
+                 color_contact_faces: bool = False, marker_style: str = "sprite"):
+        """`marker_style`: "sprite" draws each contact sphere as a ray-cast point sprite (cheap at
+        thousands of markers); "mesh" as an instanced 80-triangle icosphere (kept for comparison)."""
         pyrender = load_pyrender()
         self.dentition = dentition
         self.size = (int(size[0]), int(size[1]))
@@ -122,18 +124,26 @@ class DentitionScene:
             self.teeth[fdi] = d
             self.scene.add_node(d.node)
 
-        pos, nrm, idx = _unit_sphere(marker_subdivisions)
+        self.marker_style = marker_style
         self.marker_material = pyrender.MetallicRoughnessMaterial(
             baseColorFactor=[*CONTACT_COLOR, 1.0], metallicFactor=0.0, roughnessFactor=1.0,
             emissiveFactor=[0.35 * c for c in CONTACT_COLOR],  # stays saturated on the shadow side
         )
-        self.markers = pyrender.Primitive(positions=pos, normals=nrm, indices=idx, material=self.marker_material,
-                                          poses=np.eye(4, dtype=np.float32)[None])
+        if marker_style == "sprite":
+            # one point per sphere, (radius, 0) in texcoord_0; see shaders/marker.vert
+            self.markers = pyrender.Primitive(positions=np.zeros((1, 3), np.float32),
+                                              texcoord_0=np.zeros((1, 2), np.float32),
+                                              mode=pyrender.GLTF.POINTS, material=self.marker_material)
+        elif marker_style == "mesh":
+            pos, nrm, idx = _unit_sphere(1)
+            self.markers = pyrender.Primitive(positions=pos, normals=nrm, indices=idx, material=self.marker_material,
+                                              poses=np.eye(4, dtype=np.float32)[None])
+        else:
+            raise ValueError(f"marker_style must be 'sprite' or 'mesh', not {marker_style!r}")
         self.marker_mesh = pyrender.Mesh([self.markers], name="contact markers")
         self.marker_mesh.is_visible = False
         self.marker_node = pyrender.Node(name="contact markers", mesh=self.marker_mesh)
         self.scene.add_node(self.marker_node)
-        self._marker_poses = np.zeros((0, 4, 4), np.float32)
 
         self.camera = pyrender.PerspectiveCamera(yfov=1.0, aspectRatio=self.size[0] / self.size[1])
         self.camera_node = pyrender.Node(name="camera", camera=self.camera)
@@ -152,7 +162,7 @@ class DentitionScene:
     # ----------------------------------------------------------------------------------- views
     def view(self, name: str) -> CameraView:
         """The preset `name`, framed from the rest-pose vertices of the arches it shows (cached)."""
-        check_view(name)
+        name = check_view(name)
         if name not in self._views:
             from .cameras import PRESETS
 
@@ -208,11 +218,18 @@ class DentitionScene:
         self.marker_mesh.is_visible = n > 0
         if n == 0:
             return
-        poses = np.zeros((n, 4, 4), np.float32)
-        poses[:, 0, 0] = poses[:, 1, 1] = poses[:, 2, 2] = radii
-        poses[:, :3, 3] = centers
-        poses[:, 3, 3] = 1.0
-        self.markers._poses = poses  # already (n, 4, 4) float32 contiguous: skip the setter's copies
+        if self.marker_style == "sprite":
+            # set the arrays directly: the setters would copy and re-derive buffer flags
+            self.markers._positions = np.ascontiguousarray(centers, dtype=np.float32)
+            tex = np.zeros((n, 2), np.float32)
+            tex[:, 0] = radii
+            self.markers._texcoord_0 = tex
+        else:
+            poses = np.zeros((n, 4, 4), np.float32)
+            poses[:, 0, 0] = poses[:, 1, 1] = poses[:, 2, 2] = radii
+            poses[:, :3, 3] = centers
+            poses[:, 3, 3] = 1.0
+            self.markers._poses = poses  # already (n, 4, 4) float32 contiguous
         self.markers._bounds = None
         self.buffer_versions[self.markers] = self.buffer_versions.get(self.markers, 0) + 1
 

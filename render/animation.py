@@ -1,0 +1,266 @@
+"""Turning a sequence of frame states into files: PNG frames, an MP4 and optionally a GIF.
+
+`render_run` is the CLI's entry point: it builds the scene once, renders every state from each
+chosen view (several views are tiled into one frame, left to right, three per row), and hands the
+images to a `FrameSink`, which encodes on background threads while the next frame renders:
+  - PNG: one file per frame, `frames/NNNNN.png`, each written to a temporary file then renamed
+    (`orthosim.atomic`); zlib level 1, because PNG is lossless at any level and the highest
+    levels cost more than the rendering;
+  - MP4: H.264 through the ffmpeg binary that the `imageio-ffmpeg` wheel ships, fed through a
+    pipe (the encoder runs in its own process), written to a temporary file renamed at the end;
+  - GIF (optional): half size, palette per frame; for long runs every k-th frame only, k doubling
+    whenever more than GIF_MAX_FRAMES are kept, so memory stays bounded.
+The queues between the renderer and the encoders are bounded: a slow disk slows the run down
+instead of filling memory.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import queue
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from orthosim.atomic import atomic_path
+
+from .cameras import check_view
+from .frame_state import FrameState
+
+VIDEO_FPS = 30
+GIF_MAX_FRAMES = 240
+_END = object()
+
+
+def tile(images: Sequence[np.ndarray], columns: int = 3) -> np.ndarray:
+    """Views side by side, `columns` per row; empty cells take the first image's corner colour."""
+    if len(images) == 1:
+        return images[0]
+    h, w, c = images[0].shape
+    cols = min(columns, len(images))
+    rows = -(-len(images) // cols)
+    out = np.empty((rows * h, cols * w, c), np.uint8)
+    out[:] = images[0][0, 0]
+    for i, im in enumerate(images):
+        r, k = divmod(i, cols)
+        out[r * h:(r + 1) * h, k * w:(k + 1) * w] = im
+    return out
+
+
+class _Worker(threading.Thread):
+    """Runs `handle(item)` for each queued item; re-raises its first error in the caller on `finish`."""
+
+    def __init__(self, name: str, handle, maxsize: int = 8):
+        super().__init__(name=name, daemon=True)
+        self.q: queue.Queue = queue.Queue(maxsize=maxsize)
+        self.handle = handle
+        self.error: BaseException | None = None
+        self.start()
+
+    def run(self):
+        while True:
+            item = self.q.get()
+            if item is _END:
+                return
+            if self.error is None:
+                try:
+                    self.handle(item)
+                except BaseException as exc:  # kept and re-raised in the rendering thread
+                    self.error = exc
+
+    def put(self, item):
+        if self.error is not None:
+            raise self.error
+        self.q.put(item)
+
+    def finish(self):
+        self.q.put(_END)
+        self.join()
+        if self.error is not None:
+            raise self.error
+
+
+class FrameSink:
+    """Writes frames as PNG files and/or an MP4 (and a GIF), encoding on background threads."""
+
+    def __init__(self, out_dir: str | Path, *, png: bool = True, mp4: bool = True, gif: bool = False,
+                 video_fps: int = VIDEO_FPS, png_threads: int = 2):
+        self.out_dir = Path(out_dir)
+        self.frames_dir = self.out_dir / "frames"
+        self.png, self.mp4, self.gif = png, mp4, gif
+        self.video_fps = video_fps
+        self.count = 0
+        self._stack = contextlib.ExitStack()
+        self._png_workers = [_Worker(f"png-{i}", self._write_png) for i in range(png_threads)] if png else []
+        self._video_worker = None
+        self._video_size = None
+        self._gif_frames: list = []
+        self._gif_stride = 1
+        if png:
+            self.frames_dir.mkdir(parents=True, exist_ok=True)
+        else:
+            self.out_dir.mkdir(parents=True, exist_ok=True)
+
+    # ------------------------------------------------------------------------------ writers
+    def _write_png(self, item):
+        index, image = item
+        from PIL import Image
+
+        target = self.frames_dir / f"{index:05d}.png"
+        with atomic_path(target) as tmp:
+            Image.fromarray(image).save(tmp, format="PNG", compress_level=1)
+
+    def _start_video(self, image: np.ndarray):
+        import imageio_ffmpeg
+
+        h, w = image.shape[:2]
+        self._video_size = (w, h)
+        tmp = self._stack.enter_context(atomic_path(self.out_dir / "animation.mp4"))
+        # Even dimensions for yuv420p; pad by repeating the edge instead of rescaling.
+        self._pad = (h % 2, w % 2)
+        writer = imageio_ffmpeg.write_frames(
+            str(tmp), (w + self._pad[1], h + self._pad[0]), pix_fmt_in="rgb24", fps=self.video_fps,
+            codec="libx264", macro_block_size=1, ffmpeg_log_level="error",
+            output_params=["-preset", "ultrafast", "-crf", "20"],
+        )
+        writer.send(None)  # start ffmpeg
+        self._video_writer = writer
+
+        def handle(frame):
+            writer.send(frame)
+
+        self._video_worker = _Worker("mp4", handle)
+
+    def _keep_for_gif(self, image: np.ndarray):
+        if self.count % self._gif_stride:
+            return
+        self._gif_frames.append(np.ascontiguousarray(image[::2, ::2, :3]))
+        if len(self._gif_frames) > GIF_MAX_FRAMES:
+            self._gif_frames = self._gif_frames[::2]
+            self._gif_stride *= 2
+
+    # --------------------------------------------------------------------------------- API
+    def add(self, image: np.ndarray) -> None:
+        """Queue one frame, (h, w, 3) RGB or (h, w, 4) RGBA uint8; PNGs keep the alpha, video drops it."""
+        if self.png:
+            self._png_workers[self.count % len(self._png_workers)].put((self.count, image))
+        if self.mp4:
+            if self._video_worker is None:
+                self._start_video(image)
+            rgb = image[:, :, :3]
+            if self._pad != (0, 0):
+                rgb = np.pad(rgb, ((0, self._pad[0]), (0, self._pad[1]), (0, 0)), mode="edge")
+            self._video_worker.put(np.ascontiguousarray(rgb))
+        if self.gif:
+            self._keep_for_gif(image)
+        self.count += 1
+
+    def close(self) -> dict:
+        """Flush every encoder, move the files into place; returns what was written."""
+        written = {"frames": self.count}
+        try:
+            for w in self._png_workers:
+                w.finish()
+            if self._video_worker is not None:
+                self._video_worker.finish()
+                self._video_writer.close()
+                written["mp4"] = str(self.out_dir / "animation.mp4")
+            if self.png:
+                written["frames_dir"] = str(self.frames_dir)
+            if self.gif and self._gif_frames:
+                from PIL import Image
+
+                ims = [Image.fromarray(f) for f in self._gif_frames]
+                duration = int(round(1000 * self._gif_stride / self.video_fps))
+                with atomic_path(self.out_dir / "animation.gif") as tmp:
+                    ims[0].save(tmp, format="GIF", save_all=True, append_images=ims[1:], duration=duration, loop=0)
+                written["gif"] = str(self.out_dir / "animation.gif")
+        except BaseException:
+            self._stack.__exit__(*sys.exc_info())  # drop the temporary MP4
+            raise
+        self._stack.close()  # rename the MP4 into place
+        return written
+
+
+    def abort(self) -> None:
+        """Stop after a failure: stop the encoders and leave no temporary or partial video behind."""
+        for w in self._png_workers + ([self._video_worker] if self._video_worker else []):
+            with contextlib.suppress(BaseException):
+                w.finish()
+        if self._video_worker is not None:
+            with contextlib.suppress(BaseException):
+                self._video_writer.close()
+        self._stack.__exit__(RuntimeError, RuntimeError("aborted"), None)
+
+
+class _Progress:
+    """tqdm bar shown only on a terminal and only once the run has lasted a second."""
+
+    def __init__(self, enabled: bool, total: int | None):
+        self.bar = None
+        if enabled and sys.stderr.isatty():
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, unit="frame", delay=1.0, dynamic_ncols=True, leave=False)
+
+    def update(self, n_done: int, fps: float):
+        if self.bar is not None:
+            self.bar.set_postfix_str(f"{fps:.1f} frames/s", refresh=False)
+            self.bar.update(1)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, views: Sequence[str] = ("frontal",),
+               size: tuple[int, int] = (640, 480), gif: bool = False, alpha: bool = False, progress: bool = True,
+               hide_roots: bool = False, color_contact_faces: bool = False, png: bool = True, mp4: bool = True) -> dict:
+    """Render every state in `frames` into out_dir (frames/NNNNN.png, animation.mp4, animation.gif).
+
+    Returns {"frames": n, "fps": end-to-end frames per second (render, read back, encode, write),
+    "render_fps": ..., "views": [...], "size": [w, h], ...}. The caller records it in metrics.json.
+    """
+    from .renderer import Renderer
+    from .scene import DentitionScene
+
+    views = [check_view(v) for v in (views or ("frontal",))]
+    out_dir = Path(out_dir)
+    total = len(frames) if hasattr(frames, "__len__") else None
+    scene = DentitionScene(dentition, size, hide_roots=hide_roots, color_contact_faces=color_contact_faces)
+    sink = FrameSink(out_dir, png=png, mp4=mp4, gif=gif)
+    bar = _Progress(progress, total)
+    render_s = 0.0
+    n = 0
+    try:
+        with Renderer(size, alpha=alpha) as renderer:
+            started = time.perf_counter()
+            for state in frames:
+                t0 = time.perf_counter()
+                scene.update(state)
+                images = [renderer.render(scene, v) for v in views]
+                render_s += time.perf_counter() - t0
+                sink.add(tile(images))
+                n += 1
+                bar.update(n, n / max(time.perf_counter() - started, 1e-9))
+            written = sink.close()
+            elapsed = time.perf_counter() - started
+            gl_renderer = renderer.gl_renderer
+    except BaseException:
+        sink.abort()
+        raise
+    finally:
+        bar.close()
+    return {
+        "frames": n,
+        "fps": n / elapsed if elapsed > 0 else None,
+        "render_fps": n / render_s if render_s > 0 else None,
+        "views": list(views),
+        "size": list(size),
+        "gl_renderer": gl_renderer,
+        "outputs": {k: v for k, v in written.items() if k != "frames"},
+    }

@@ -1,0 +1,288 @@
+"""`orthosim bench`: throughput of each stage, measured in one run on one case, against the 40 fps target.
+
+What is measured (median over per-frame wall times after a warm-up, so a stray slow frame on a
+shared machine does not move the figure; fps = 1 / median frame time):
+  - render: draw plus colour read-back of one 640x480 frame, the scene already updated;
+  - end_to_end: produce the state (the simulation step when one is plugged in, else the
+    synthetic movement below), detect contacts (when a detector is plugged in), update the scene,
+    render, read back, and encode (MP4 always, PNG frames unless disabled) on the background
+    encoders of `render.animation.FrameSink`, whose bounded queues make the loop wait for them;
+  - render_variants: the same render with each optimisation switched off in turn, measured
+    round-robin in the same run so that the ratios stand even when the absolute figures wander
+    with the machine's load;
+  - memory: resident set size before and after a long (default 2,000 frames) update+render run:
+    leaked GL programs or buffers would show there.
+Components that do not exist yet are reported as null with a "pending" note, never estimated.
+
+The measurement is built on callables so that later issues can plug in the real parts:
+`step(i) -> FrameState` (the simulation) and `detect(state) -> FrameState` (contacts added).
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import statistics
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .frame_state import FrameState
+
+TARGET_FPS = 40  # the paper's figure, with a graphics card
+E2E_TARGET_FPS = 60  # issue 4's target for this 2-core machine, end to end at 640x480
+
+
+def rss_mb() -> float:
+    """Current resident set size of this process, MB (from /proc, Linux)."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+class SyntheticMotion:
+    """A stand-in for the simulation: some teeth translate along the arch, contacts follow them.
+
+    `moving` teeth slide distally and back (up to `amplitude` mm, one cycle per `period` frames).
+    Each frame reports `n_markers` contact spheres taken from the crown vertices of the moving
+    teeth and their neighbours (a different subset every frame, so the marker buffer changes as
+    it will with a real detector), each moved with its tooth.
+    """
+
+    def __init__(self, dentition, n_markers: int = 2000, moving: tuple[int, ...] | None = None,
+                 amplitude: float = 2.0, period: int = 120, seed: int = 0):
+        self.dentition = dentition
+        fdis = dentition.fdis
+        if moving is None:
+            moving = tuple(f for f in (13, 23, 33, 43) if f in dentition.teeth) or tuple(fdis[:2])
+        self.moving = frozenset(moving)
+        self.rest = dentition.rest_poses()
+        self.amplitude, self.period = amplitude, period
+        self.n_markers = n_markers
+        self.rng = np.random.default_rng(seed)
+        # marker pool: crown vertices of the moving teeth and their arch neighbours, local frames
+        pairs = dentition.adjacent_pairs()
+        involved = sorted({f for p in pairs for f in p if self.moving & set(p)} | set(self.moving))
+        self.pool_tooth, self.pool_local = [], []
+        for f in involved:
+            t = dentition.teeth[f]
+            v = t.mesh.vertices[np.unique(t.mesh.faces[t.face_part == 0])]
+            self.pool_tooth.append(np.full(len(v), f))
+            self.pool_local.append(v)
+        self.pool_tooth = np.concatenate(self.pool_tooth)
+        self.pool_local = np.concatenate(self.pool_local)
+        self.pairs = tuple(p for p in pairs if self.moving & set(p))
+        # direction of travel: distal along the arch at rest (local mesial axis, reversed)
+        self.dir = {f: -(self.rest[f][:3, :3] @ dentition.teeth[f].mesial) for f in self.moving}
+
+    def __call__(self, i: int) -> FrameState:
+        s = self.amplitude * 0.5 * (1 - np.cos(2 * np.pi * i / self.period))
+        poses = dict(self.rest)
+        for f in self.moving:
+            p = self.rest[f].copy()
+            p[:3, 3] += s * self.dir[f]
+            poses[f] = p
+        n = min(self.n_markers, len(self.pool_local))
+        idx = self.rng.choice(len(self.pool_local), n, replace=False) if n else np.zeros(0, int)
+        centers = np.empty((n, 3))
+        for f in np.unique(self.pool_tooth[idx]):
+            sel = self.pool_tooth[idx] == f
+            T = poses[int(f)]
+            centers[sel] = self.pool_local[idx[sel]] @ T[:3, :3].T + T[:3, 3]
+        radii = self.rng.uniform(0.15, 0.35, n)
+        return FrameState(poses=poses, moving=self.moving, contact_centers=centers, contact_radii=radii,
+                          contact_pairs=self.pairs, step=i)
+
+
+def _median_fps(times: list[float]) -> float:
+    return 1.0 / statistics.median(times) if times else float("nan")
+
+
+def _render_variants(dentition, states, size, frames_per_round: int, rounds: int) -> dict:
+    """Render fps with each optimisation undone, round-robin, plus ratios to the shipped setting."""
+    from .renderer import Renderer
+    from .scene import DentitionScene
+
+    variants = {
+        # name: (renderer options, scene options, what it undoes)
+        "pyrender_stock_pbr": (dict(shading="pbr", lean=False), dict(marker_style="mesh"),
+                               "pyrender's own forward pass and physically based shaders, markers as icospheres"),
+        "stock_pass_lambert": (dict(lean=False), dict(marker_style="mesh"),
+                               "our per-pixel Lambert shaders in pyrender's stock forward pass, icosphere markers"),
+        "lean_pass_pixel_lit": (dict(lighting="pixel"), dict(marker_style="mesh"),
+                                "+ lean forward pass (program, camera, lights bound once per frame)"),
+        "lean_pass_vertex_lit": (dict(lighting="vertex"), dict(marker_style="mesh"),
+                                 "+ lighting per vertex instead of per pixel"),
+        "shipped": (dict(), dict(), "+ markers as point sprites (the default configuration)"),
+        "shipped_msaa4": (dict(msaa=True), dict(), "the default with 4x multisampling and glReadPixels"),
+    }
+    setups = {}
+    for name, (ropts, sopts, _) in variants.items():
+        r = Renderer(size, **ropts)
+        sc = DentitionScene(dentition, size, **sopts)
+        sc.update(states[0])
+        r.render(sc)  # compile shaders, upload meshes
+        setups[name] = (r, sc)
+    times = {name: [] for name in variants}
+    for k in range(rounds):
+        for name, (r, sc) in setups.items():
+            for j in range(frames_per_round):
+                sc.update(states[(k * frames_per_round + j) % len(states)])
+                t0 = time.perf_counter()
+                r.render(sc)
+                times[name].append(time.perf_counter() - t0)
+    for r, _ in setups.values():
+        r.close()
+    base = _median_fps(times["shipped"])
+    first = _median_fps(times["pyrender_stock_pbr"])
+    return {
+        name: {"fps": _median_fps(times[name]), "frames": len(times[name]),
+               "ratio_to_shipped": _median_fps(times[name]) / base, "ratio_to_stock": _median_fps(times[name]) / first,
+               "what": variants[name][2]}
+        for name in variants
+    }
+
+
+def run_bench(case: str | Path | None = None, *, frames: int = 300, warmup: int = 30, size=(640, 480),
+              n_markers: int = 2000, memory_frames: int = 2000, variant_rounds: int = 4,
+              step: Callable[[int], FrameState] | None = None, detect: Callable[[FrameState], FrameState] | None = None,
+              work_dir: str | Path | None = None, png: bool = True, progress: bool = False) -> dict:
+    """Measure and return the bench record (see the module docstring and the output contract)."""
+    import tempfile
+
+    from .animation import FrameSink
+    from .renderer import Renderer
+    from .scene import DentitionScene
+
+    t_start = time.perf_counter()
+    load_start = os.getloadavg()
+    if case is not None:
+        from orthosim.case import load_case
+
+        dentition = load_case(case).build_dentition()
+        model = f"case {case}"
+    else:
+        from .standin import default_dentition
+
+        dentition, model = default_dentition()
+    n_tri = {f: len(t.mesh.faces) for f, t in dentition.teeth.items()}
+    synthetic = SyntheticMotion(dentition, n_markers=n_markers)
+    source = step or synthetic
+    n_states = warmup + frames
+    states = [synthetic(i) for i in range(n_states)]  # for render-alone: same states every variant
+
+    mem_start = rss_mb()
+    renderer = Renderer(size)
+    scene = DentitionScene(dentition, size)
+    gl_renderer, gl_version = renderer.gl_renderer, renderer.gl_version
+
+    # ---- render alone: draw + read back, state updated outside the timed region
+    render_times = []
+    for i, st in enumerate(states):
+        scene.update(st)
+        t0 = time.perf_counter()
+        renderer.render(scene, "frontal")
+        if i >= warmup:
+            render_times.append(time.perf_counter() - t0)
+
+    # ---- end to end: state -> (detect) -> update -> render -> read back -> encode
+    e2e_times = []
+    tmp_ctx = tempfile.TemporaryDirectory(prefix="orthosim-bench-") if work_dir is None else None
+    out_dir = Path(work_dir) if work_dir is not None else Path(tmp_ctx.name)
+    sink = FrameSink(out_dir, png=png, mp4=True)
+    t_loop = time.perf_counter()
+    for i in range(n_states):
+        t0 = time.perf_counter()
+        st = source(i)
+        if detect is not None:
+            st = detect(st)
+        scene.update(st)
+        image = renderer.render(scene, "frontal")
+        sink.add(image)
+        if i >= warmup:
+            e2e_times.append(time.perf_counter() - t0)
+        if i == warmup - 1:
+            t_loop = time.perf_counter()
+    sink.close()
+    e2e_overall = frames / (time.perf_counter() - t_loop)  # includes draining the encoders
+    mp4_bytes = (out_dir / "animation.mp4").stat().st_size if (out_dir / "animation.mp4").exists() else 0
+    if tmp_ctx is not None:
+        tmp_ctx.cleanup()
+
+    # ---- memory over a long run (same renderer and scene: what a real run does)
+    mem_before_long = rss_mb()
+    t0 = time.perf_counter()
+    for i in range(memory_frames):
+        scene.update(synthetic(i))
+        renderer.render(scene, "frontal")
+    long_fps = memory_frames / (time.perf_counter() - t0) if memory_frames else None
+    mem_end = rss_mb()
+    renderer.close()
+
+    variants = _render_variants(dentition, states, size, frames_per_round=max(10, frames // 10),
+                                rounds=variant_rounds)
+
+    fps_render = _median_fps(render_times)
+    fps_e2e = _median_fps(e2e_times)
+    pending_sim = None if step is not None else "issue 6 (tooth movement) not merged: end_to_end uses SyntheticMotion"
+    pending_det = None if detect is not None else "issue 5 (collision detection) not merged: no detector in end_to_end"
+    record = {
+        "machine": {
+            "cores": os.cpu_count(),
+            "gl_renderer": gl_renderer,
+            "gl_version": gl_version,
+            "python": platform.python_version(),
+            "load_average_start": list(load_start),
+            "load_average_end": list(os.getloadavg()),
+        },
+        "target_fps": TARGET_FPS,
+        "end_to_end_target_fps": E2E_TARGET_FPS,
+        "model": {"source": model, "teeth": len(n_tri), "triangles_total": int(sum(n_tri.values())),
+                  "triangles_min_per_tooth": int(min(n_tri.values()))},
+        "size": list(size),
+        "contact_markers": n_markers,
+        "frames": frames,
+        "warmup": warmup,
+        "fps": {
+            "simulation": None,
+            "render": fps_render,
+            "end_to_end": fps_e2e,
+        },
+        "meets_target": {
+            "render": fps_render >= TARGET_FPS,
+            "end_to_end": fps_e2e >= TARGET_FPS,
+            "end_to_end_60": fps_e2e >= E2E_TARGET_FPS,
+        },
+        "end_to_end": {
+            "includes": ["synthetic state" if step is None else "simulation step"]
+                        + (["collision detection"] if detect is not None else [])
+                        + ["scene update", "draw", "colour read-back", "MP4 encode (libx264 ultrafast)"]
+                        + (["PNG frames (zlib level 1)"] if png else []),
+            "fps_overall_including_encoder_drain": e2e_overall,
+            "mp4_bytes": mp4_bytes,
+        },
+        "collision_us_per_step": None,
+        "pending": {k: v for k, v in {"simulation": pending_sim, "collision": pending_det}.items() if v},
+        "render_variants": variants,
+        "memory_mb": {"start": mem_start, "before_long_run": mem_before_long, "end": mem_end,
+                      "long_run_frames": memory_frames, "long_run_fps": long_fps},
+        "wall_s": time.perf_counter() - t_start,
+    }
+    if step is not None:
+        sim_times = []
+        for i in range(n_states):
+            t0 = time.perf_counter()
+            step(i)
+            if i >= warmup:
+                sim_times.append(time.perf_counter() - t0)
+        record["fps"]["simulation"] = _median_fps(sim_times)
+    return record
