@@ -60,3 +60,13 @@ def test_missing_case_file(tmp_path):
 def test_bad_size_option_is_refused():
     r = orthosim("run", "cases/normal_occlusion.toml", "--size", "big")
     assert r.returncode == 2 and "WIDTHxHEIGHT" in r.stderr
+
+
+def test_outputs_get_ordinary_file_permissions(tmp_path):
+    from orthosim.atomic import write_json
+
+    target = tmp_path / "m.json"
+    write_json(target, {"a": 1})
+    umask = os.umask(0)
+    os.umask(umask)
+    assert target.stat().st_mode & 0o777 == 0o666 & ~umask
