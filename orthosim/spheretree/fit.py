@@ -34,12 +34,16 @@ from .tree import SphereTree
 class FitOptions:
     """Knobs of the optimising builder (defaults tuned on the parametric and real teeth)."""
 
-    normal_weight: float = 1.0  # normal's weight in k-means features, in units of the patch size
+    normal_weight: float = 0.0  # normal's weight in k-means features, in units of the patch size
+    medial_pull: float = 0.6  # k-means on x - medial_pull * rho(x) * n(x): 0 surface, 1 medial centres
+    medial_cap_mm: float = 4.0  # rho capped at this depth, mm
+    medial_samples: int = 4000  # faces on which rho is estimated
     lloyd_iterations: int = 12
     grid_points: int = 300_000  # cells of the voxel grid over the tooth's bounds (sets spacing)
     band_mm: float = 1.5  # thickness of the outside band that scores spheres, mm
     depths: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0)  # x patch radius
     search_rounds: int = 8
+    reassign_rounds: int = 3
     seed: int = 0
 
 
@@ -82,6 +86,30 @@ def _batched_kmeans(features: np.ndarray, node: np.ndarray, n_nodes: int, k: int
     return label
 
 
+def medial_radii(
+    points: np.ndarray, normals: np.ndarray, surface: np.ndarray, r_max: float, iterations: int = 16
+) -> np.ndarray:
+    """Radius of the largest ball inside the tooth touching each surface point, mm (shrinking ball).
+
+    `points` (p, 3) mm on the surface with outward unit `normals` (p, 3); `surface` (s, 3) mm dense
+    surface points. Start with a ball of radius `r_max` mm and, while a surface point lies inside
+    it, shrink it to the ball tangent at the point that passes through that surface point.
+    """
+    tree = cKDTree(surface)
+    r = np.full(len(points), float(r_max))
+    for _ in range(iterations):
+        c = points - r[:, None] * normals
+        d, j = tree.query(c)
+        v = points - surface[j]
+        denom = 2.0 * np.einsum("ij,ij->i", v, normals)
+        shrink = (d < r * (1 - 1e-9)) & (denom > 1e-12)
+        if not shrink.any():
+            break
+        r_new = np.einsum("ij,ij->i", v, v) / np.where(denom > 1e-12, denom, 1.0)
+        r = np.where(shrink, np.minimum(r, r_new), r)
+    return r
+
+
 def partition_faces(
     vertices: np.ndarray, faces: np.ndarray, branching: int, depth: int, options: FitOptions
 ) -> tuple[list[np.ndarray], list[np.ndarray]]:
@@ -93,6 +121,12 @@ def partition_faces(
     area = 0.5 * np.linalg.norm(cross, axis=1)
     normal = cross / np.maximum(2 * area, 1e-300)[:, None]
     total_area = float(area.sum())
+    if options.medial_pull:
+        # Estimated on a subsample of faces (a smooth field), spread to the rest by nearest face.
+        sub = rng.choice(len(faces), size=min(len(faces), options.medial_samples), replace=False)
+        rho_sub = medial_radii(centroid[sub], normal[sub], vertices, options.medial_cap_mm)
+        rho = rho_sub[cKDTree(centroid[sub]).query(centroid)[1]]
+        centroid = centroid - (options.medial_pull * np.minimum(rho, options.medial_cap_mm))[:, None] * normal
     node = np.zeros(len(faces), dtype=np.int64)
     node_of_face = [node]
     parents = [np.array([-1], dtype=np.int64)]
@@ -125,47 +159,86 @@ def _outside_band(vertices: np.ndarray, faces: np.ndarray, options: FitOptions) 
     return origin + h * ijk, h
 
 
+class _LeafFitter:
+    """Scores leaf spheres by the outside-band voxels they hold; fits and re-fits them."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, options: FitOptions):
+        self.vertices, self.faces, self.options = vertices, faces, options
+        band, self.voxel = _outside_band(vertices, faces, options)
+        self.outside = cKDTree(band)
+
+    def score(self, pts: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For padded patch points (L, M, 3) and centres (L, c, 3), mm: outside voxels held, radii (L, c)."""
+        r = np.sqrt(((pts[:, None, :, :] - centres[:, :, None, :]) ** 2).sum(axis=3).max(axis=2))
+        cnt = self.outside.query_ball_point(centres.reshape(-1, 3), r.ravel(), return_length=True).reshape(r.shape)
+        # Ties (e.g. no outside voxel at all) go to the smaller sphere.
+        return cnt + r / (100 * r.max()), r
+
+    def search(self, pts: np.ndarray, c: np.ndarray, step: np.ndarray) -> np.ndarray:
+        """Pattern search on the centres (L, 3) mm from `step` (L,) mm: move while the score drops."""
+        rows = np.arange(len(c))
+        best_s = self.score(pts, c[:, None, :])[0][:, 0]
+        dirs = np.concatenate([np.eye(3), -np.eye(3)])
+        for _ in range(self.options.search_rounds):
+            cand = c[:, None, :] + step[:, None, None] * dirs[None, :, :]
+            s, _ = self.score(pts, cand)
+            j = s.argmin(axis=1)
+            sj = s[rows, j]
+            improved = sj < best_s
+            c[improved] = cand[improved, j[improved]]
+            best_s[improved] = sj[improved]
+            step = np.where(improved, step, 0.5 * step)
+        return c
+
+    def fit(self, leaf_of_face: np.ndarray, n_leaves: int) -> tuple[np.ndarray, np.ndarray]:
+        """First fit: centres (L, 3), radii (L,), mm, from candidates along each patch's inward normal."""
+        pts = self.vertices[node_vertex_groups(self.faces, leaf_of_face, n_leaves)]  # (L, M, 3)
+        c0, r0 = enclosing_spheres(pts, iterations=60)
+        tri = self.vertices[self.faces]
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # area-weighted normals
+        n = np.stack([np.bincount(leaf_of_face, weights=cross[:, i], minlength=n_leaves) for i in range(3)], axis=1)
+        n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+        t = np.asarray(self.options.depths)
+        cand = c0[:, None, :] - (r0[:, None] * t[None, :])[:, :, None] * n[:, None, :]
+        s, _ = self.score(pts, cand)
+        c = cand[np.arange(n_leaves), s.argmin(axis=1)]
+        c = self.search(pts, c, 0.25 * r0)
+        return c, radii_to_cover(pts, c)
+
+    def reassign(self, leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray, k: int = 12) -> np.ndarray:
+        """Give each face to the leaf, among those already holding all its vertices, where it sits deepest.
+
+        A face moves only into a sphere that holds it, so coverage is kept, and the sphere it
+        leaves may then shrink: the boundary faces that set a sphere's radius migrate away.
+        """
+        tri = self.vertices[self.faces]
+        k = min(k, len(r))
+        _, near = cKDTree(c).query(tri.mean(axis=1), k=k)
+        near = np.concatenate([leaf_of_face[:, None], near.reshape(len(tri), -1)], axis=1)  # current first
+        far = np.sqrt(((tri[:, None, :, :] - c[near][:, :, None, :]) ** 2).sum(axis=3).max(axis=2))
+        rn = r[near]
+        slack = (rn - far) / np.maximum(rn, 1e-300)  # relative depth of the face inside each candidate
+        slack[far > rn] = -np.inf
+        return near[np.arange(len(tri)), slack.argmax(axis=1)]
+
+
 def fit_leaves(
     vertices: np.ndarray, faces: np.ndarray, leaf_of_face: np.ndarray, n_leaves: int, options: FitOptions
-) -> tuple[np.ndarray, np.ndarray]:
-    """Leaf spheres holding their patches with the least outside volume: centres (L, 3), radii (L,), mm."""
-    groups = node_vertex_groups(faces, leaf_of_face, n_leaves)
-    pts = vertices[groups]  # (L, M, 3)
-    c0, r0 = enclosing_spheres(pts, iterations=60)
-    tri = vertices[faces]
-    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # area-weighted normals
-    n = np.stack([np.bincount(leaf_of_face, weights=cross[:, i], minlength=n_leaves) for i in range(3)], axis=1)
-    n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
-    band, h = _outside_band(vertices, faces, options)
-    outside = cKDTree(band)
-
-    def score(centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Outside voxels in the sphere (count) and the covering radius, for (L, 3) or (L, c, 3) centres."""
-        shp = centres.shape[:-1]
-        cc = centres.reshape(n_leaves, -1, 3)
-        r = np.sqrt(((pts[:, None, :, :] - cc[:, :, None, :]) ** 2).sum(axis=3).max(axis=2))
-        cnt = outside.query_ball_point(cc.reshape(-1, 3), r.ravel(), return_length=True).reshape(r.shape)
-        # Ties (e.g. no outside voxel at all) go to the smaller sphere.
-        return (cnt + r / (100 * r.max())).reshape(shp), r.reshape(shp)
-
-    t = np.asarray(options.depths)
-    cand = c0[:, None, :] - (r0[:, None] * t[None, :])[:, :, None] * n[:, None, :]
-    s, _ = score(cand)
-    best = s.argmin(axis=1)
-    c = cand[np.arange(n_leaves), best]
-    best_s = s[np.arange(n_leaves), best]
-    step = 0.25 * r0
-    dirs = np.concatenate([np.eye(3), -np.eye(3)])
-    for _ in range(options.search_rounds):
-        cand = c[:, None, :] + step[:, None, None] * dirs[None, :, :]
-        s, _ = score(cand)
-        j = s.argmin(axis=1)
-        sj = s[np.arange(n_leaves), j]
-        improved = sj < best_s
-        c[improved] = cand[improved, j[improved]]
-        best_s[improved] = sj[improved]
-        step = np.where(improved, step, 0.5 * step)
-    return c, radii_to_cover(pts, c)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Leaf spheres with the least outside volume: centres (L, 3), radii (L,), mm, and (F,) leaf of each face."""
+    fitter = _LeafFitter(vertices, faces, options)
+    c, r = fitter.fit(leaf_of_face, n_leaves)
+    for _ in range(options.reassign_rounds):
+        leaf_of_face = fitter.reassign(leaf_of_face, c, r)
+        groups = node_vertex_groups(faces, leaf_of_face, n_leaves)
+        pts = vertices[groups]
+        # A leaf that gave away all its faces shrinks to a point; build_fit_tree drops it.
+        empty = groups[:, 0] < 0
+        pts[empty] = c[empty][:, None, :]
+        r = radii_to_cover(pts, c)
+        c = fitter.search(pts, c, 0.1 * r)
+        r = radii_to_cover(pts, c)
+    return c, r, leaf_of_face
 
 
 def build_fit_tree(
@@ -176,16 +249,28 @@ def build_fit_tree(
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     node_of_face, parents = partition_faces(vertices, faces, branching, depth, options)
-    centers, radii = [], []
-    for k in range(depth):
-        n_k = len(parents[k])
-        if k == depth - 1:
-            c, r = fit_leaves(vertices, faces, node_of_face[k], n_k, options)
-        else:
-            pts = vertices[node_vertex_groups(faces, node_of_face[k], n_k)]
-            c, r = enclosing_spheres(pts)
-        centers.append(c)
-        radii.append(r)
+    c, r, leaf = fit_leaves(vertices, faces, node_of_face[-1], len(parents[-1]), options)
+    # Faces may have moved to another leaf: drop emptied leaves, inner nodes follow their leaves.
+    keep = np.bincount(leaf, minlength=len(r)) > 0
+    renumber = np.cumsum(keep) - 1
+    node_of_face[-1] = renumber[leaf]
+    parents[-1] = parents[-1][keep]
+    c, r = c[keep], r[keep]
+    for k in range(depth - 2, -1, -1):
+        node_of_face[k] = parents[k + 1][node_of_face[k + 1]]
+    for k in range(depth - 2, 0, -1):
+        # Inner nodes left without faces go too (their children are all gone).
+        keep = np.bincount(node_of_face[k], minlength=len(parents[k])) > 0
+        renumber = np.cumsum(keep) - 1
+        node_of_face[k] = renumber[node_of_face[k]]
+        parents[k + 1] = renumber[parents[k + 1]]
+        parents[k] = parents[k][keep]
+    centers, radii = [c], [r]
+    for k in range(depth - 2, -1, -1):
+        pts = vertices[node_vertex_groups(faces, node_of_face[k], len(parents[k]))]
+        c, r = enclosing_spheres(pts)
+        centers.insert(0, c)
+        radii.insert(0, r)
     return SphereTree(
         branching=branching,
         centers=tuple(centers),
