@@ -152,7 +152,7 @@ def _render_variants(dentition, states, size, frames_per_round: int, rounds: int
     }
 
 
-def run_bench(case: str | Path | None = None, *, frames: int = 300, warmup: int = 30, size=(640, 480),
+def run_bench(case: str | Path | None = None, *, dentition=None, frames: int = 300, warmup: int = 30, size=(640, 480),
               n_markers: int = 2000, memory_frames: int = 2000, variant_rounds: int = 4,
               step: Callable[[int], FrameState] | None = None, detect: Callable[[FrameState], FrameState] | None = None,
               work_dir: str | Path | None = None, png: bool = True, progress: bool = False) -> dict:
@@ -165,7 +165,9 @@ def run_bench(case: str | Path | None = None, *, frames: int = 300, warmup: int 
 
     t_start = time.perf_counter()
     load_start = os.getloadavg()
-    if case is not None:
+    if dentition is not None:
+        model = dentition.description or "given dentition"
+    elif case is not None:
         from orthosim.case import load_case
 
         dentition = load_case(case).build_dentition()

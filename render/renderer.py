@@ -96,7 +96,9 @@ def _lean_renderer_class(pyrender, GL):
             cam_pos = scene.get_pose(scene.main_camera_node)[:3, 3].astype(np.float32)
             VP = np.ascontiguousarray(V.T, dtype=np.float32), np.ascontiguousarray(P.T, dtype=np.float32)
             lights = []
-            for ln in scene.directional_light_nodes:
+            # pyrender keeps nodes in sets, whose order changes from one scene to the next; a fixed
+            # order keeps the floating-point sum of the lights, hence every pixel, reproducible.
+            for ln in sorted(scene.directional_light_nodes, key=lambda n: n.name or ""):
                 pose = scene.get_pose(ln)
                 lights.append((-pose[:3, 2], ln.light.color, float(ln.light.intensity)))
             bound_program = None
@@ -106,7 +108,7 @@ def _lean_renderer_class(pyrender, GL):
             for node in scene.mesh_nodes:
                 if node.mesh.is_visible:
                     pose = scene.get_pose(node)
-                    nodes.append((float(np.sum((pose[:3, 3] - cam_pos) ** 2)), id(node), node, pose))
+                    nodes.append((float(np.sum((pose[:3, 3] - cam_pos) ** 2)), node.name or "", node, pose))
             nodes.sort(key=lambda item: item[:2])
             sprites = []
             for _, _, node, pose in nodes:

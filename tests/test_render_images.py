@@ -1,0 +1,211 @@
+"""Renders of the normal-occlusion model: what a clinician relies on seeing in each image.
+
+Images are checked for content (teeth fill a sensible share of the frame over the background,
+upper and lower teeth in the frontal view, crowns and roots told apart, moving teeth tinted,
+extracted teeth gone) and a known contact is looked up where its centre projects.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from render.cameras import VIEW_NAMES
+from render.frame_state import FrameState
+from render.renderer import Renderer
+from render.scene import BACKGROUND, DentitionScene
+
+ROOT = Path(__file__).resolve().parent.parent
+SIZE = (320, 240)
+BG = np.round(np.array(BACKGROUND) * 255)
+
+
+@pytest.fixture(scope="module")
+def dentition():
+    from orthosim.case import load_case
+
+    return load_case(ROOT / "cases" / "normal_occlusion.toml").build_dentition()
+
+
+@pytest.fixture(scope="module")
+def renderer():
+    with Renderer(SIZE) as r:
+        yield r
+
+
+def is_background(px) -> np.ndarray:
+    return np.all(np.abs(np.asarray(px, float)[..., :3] - BG) <= 1, axis=-1)
+
+
+def is_contact_colour(px) -> bool:
+    r, g, b = (float(v) for v in px[:3])
+    return r > 150 and g < 0.35 * r and b < 0.7 * r
+
+
+def pixel_at(image, view, point):
+    col, row = view.project(np.asarray(point)[None], SIZE)[0]
+    return image[int(round(row)), int(round(col))], (int(round(row)), int(round(col)))
+
+
+def labial_point(dentition, fdi, level: float, pose=None) -> np.ndarray:
+    """Arch-frame point on the labial surface of `fdi` at local height `level` (mm above the CEJ)."""
+    t = dentition.teeth[fdi]
+    v = t.mesh.vertices
+    band = v[np.abs(v[:, 1] - level) < 0.6]
+    local = band[np.argmax(band[:, 2])]  # most labial vertex at that height
+    return t.to_world(local, pose)
+
+
+def render(renderer, dentition, view="frontal", state=None, **scene_opts):
+    scene = DentitionScene(dentition, SIZE, **scene_opts)
+    scene.update(state or FrameState.rest(dentition))
+    renderer_ = renderer
+    image = renderer_.render(scene, view)
+    return image, scene.current_view
+
+
+# A scene's buffers live in one GL context, so each test builds its own scene; it is cheap.
+
+
+@pytest.mark.parametrize("view", VIEW_NAMES)
+def test_each_preset_frames_the_teeth_on_the_background(renderer, dentition, view):
+    image, _ = render(renderer, dentition, view)
+    teeth = ~is_background(image)
+    share = teeth.mean()
+    assert 0.12 < share < 0.85, f"{view}: teeth cover {share:.0%} of the frame"
+    # the frame is not cropped: the border rows and columns are (almost all) background
+    border = np.concatenate([teeth[0], teeth[-1], teeth[:, 0], teeth[:, -1]])
+    assert border.mean() < 0.02, f"{view}: teeth touch the image border"
+    assert is_background(image[0, 0]) and is_background(image[-1, -1])
+
+
+def test_frontal_view_shows_upper_teeth_above_lower_teeth(renderer, dentition):
+    image, view = render(renderer, dentition, "frontal")
+    rows = {}
+    for fdi in (11, 21, 31, 41, 16, 46):
+        px, (row, _) = pixel_at(image, view, labial_point(dentition, fdi, 1.5))
+        assert not is_background(px), f"tooth {fdi} is not visible in the frontal view"
+        rows[fdi] = row
+    assert rows[11] < rows[41] and rows[21] < rows[31]  # image rows grow downward
+
+
+def test_crowns_ivory_roots_paler_and_cooler(renderer, dentition):
+    image, view = render(renderer, dentition, "frontal")
+    crown, _ = pixel_at(image, view, labial_point(dentition, 11, 3.0))
+    root, _ = pixel_at(image, view, labial_point(dentition, 11, -5.0))
+    crown, root = crown.astype(int), root.astype(int)
+    assert crown[0] > crown[2] + 15, f"crown pixel {crown} is not ivory"
+    assert root[2] > root[0] + 5, f"root pixel {root} is not bluish"
+
+
+def test_hide_roots_removes_the_roots(renderer, dentition):
+    image, view = render(renderer, dentition, "frontal", hide_roots=True)
+    root, _ = pixel_at(image, view, labial_point(dentition, 11, -6.0))
+    crown, _ = pixel_at(image, view, labial_point(dentition, 11, 3.0))
+    assert is_background(root)
+    assert not is_background(crown)
+
+
+def test_moving_teeth_are_tinted_and_extracted_teeth_gone(renderer, dentition):
+    point = labial_point(dentition, 11, 3.0)
+    plain, view = render(renderer, dentition, "frontal")
+    moving, _ = render(renderer, dentition, "frontal", FrameState.rest(dentition, moving={11}))
+    gone, _ = render(renderer, dentition, "frontal", FrameState.rest(dentition, extracted={11}))
+    p_plain, rc = pixel_at(plain, view, point)
+    p_moving = moving[rc].astype(int)
+    assert p_moving[1] > p_moving[0] + 15, f"moving tooth pixel {p_moving} is not tinted"
+    assert not np.array_equal(gone[rc], p_plain)
+    # only the moving tooth changes colour
+    far, rc_far = pixel_at(plain, view, labial_point(dentition, 26, 2.0))
+    assert np.array_equal(moving[rc_far], far)
+
+
+def test_known_contact_shows_in_the_contact_colour_where_it_projects(renderer, dentition):
+    # a contact sphere on the labial face of the upper right central incisor
+    c = labial_point(dentition, 11, 3.0)
+    state = FrameState.rest(dentition, contact_centers=c[None], contact_radii=np.array([0.8]), contact_pairs=((11, 21),))
+    with_contact, view = render(renderer, dentition, "frontal", state)
+    without, _ = render(renderer, dentition, "frontal")
+    px, rc = pixel_at(with_contact, view, c)
+    assert is_contact_colour(px), f"pixel {px} at the projected contact is not the contact colour"
+    assert not is_contact_colour(without[rc])
+    # and nowhere far from it
+    far = with_contact.copy()
+    far[max(rc[0] - 12, 0):rc[0] + 13, max(rc[1] - 12, 0):rc[1] + 13] = 0
+    assert not any(is_contact_colour(p) for p in far.reshape(-1, 3)[::7])
+
+
+def test_contact_markers_follow_the_state_as_their_number_changes(renderer, dentition):
+    """The marker buffer grows and shrinks: only the current step's markers are drawn."""
+    scene = DentitionScene(dentition, SIZE)
+    c = labial_point(dentition, 11, 3.0)
+    far = labial_point(dentition, 23, 3.0)
+    rng = np.random.default_rng(1)
+    many = far + rng.normal(scale=0.5, size=(3000, 3))
+    scene.update(FrameState.rest(dentition, contact_centers=np.vstack([c[None], many]),
+                                 contact_radii=np.full(3001, 0.5)))
+    first = renderer.render(scene, "frontal")
+    scene.update(FrameState.rest(dentition, contact_centers=c[None], contact_radii=np.array([0.8])))
+    second = renderer.render(scene, "frontal")
+    view = scene.current_view
+    _, rc_far = pixel_at(first, view, far)
+    assert is_contact_colour(first[rc_far])
+    assert not is_contact_colour(second[rc_far])
+    assert is_contact_colour(pixel_at(second, view, c)[0])
+
+
+def test_faces_inside_contact_spheres_are_coloured(dentition):
+    scene = DentitionScene(dentition, SIZE, color_contact_faces=True)
+    c = labial_point(dentition, 11, 3.0)
+    scene.update(FrameState.rest(dentition, contact_centers=c[None], contact_radii=np.array([1.0]),
+                                 contact_pairs=((11, 21),)))
+    d = scene.teeth[11]
+    local = np.asarray(d.primitive.positions, float)
+    inside = np.linalg.norm(dentition.teeth[11].to_world(local) - c, axis=1) <= 1.0
+    colours = np.asarray(d.primitive.color_0)[:, :3]
+    red = np.all(np.isclose(colours, scene_contact_colour()), axis=1)
+    assert inside.any() and np.array_equal(red, inside)
+    assert not np.any(np.all(np.isclose(np.asarray(scene.teeth[21].primitive.color_0)[:, :3],
+                                        scene_contact_colour()), axis=1))
+    # contacts gone: colours restored
+    scene.update(FrameState.rest(dentition))
+    assert not np.any(np.all(np.isclose(np.asarray(d.primitive.color_0)[:, :3], scene_contact_colour()), axis=1))
+
+
+def scene_contact_colour():
+    from render.scene import CONTACT_COLOR
+
+    return np.array(CONTACT_COLOR, np.float32)
+
+
+def test_same_state_renders_identically(renderer, dentition):
+    c = labial_point(dentition, 11, 3.0)
+    state = FrameState.rest(dentition, moving={13}, contact_centers=c[None], contact_radii=np.array([0.8]))
+    a, _ = render(renderer, dentition, "right_buccal", state)
+    b, _ = render(renderer, dentition, "right_buccal", state)
+    with Renderer(SIZE) as other:
+        c2, _ = render(other, dentition, "right_buccal", state)
+    assert np.array_equal(a, b) and np.array_equal(a, c2)
+
+
+def test_alpha_output_has_a_transparent_background(dentition):
+    with Renderer(SIZE, alpha=True) as r:
+        image, view = render(r, dentition, "frontal")
+    assert image.shape == (SIZE[1], SIZE[0], 4)
+    assert image[0, 0, 3] == 0
+    px, _ = pixel_at(image, view, labial_point(dentition, 11, 3.0))
+    assert px[3] == 255
+
+
+def test_shader_programs_are_compiled_once_not_per_frame(renderer, dentition):
+    """Guards the OSMesa shader-cache fix: without it every frame compiles (and leaks) programs."""
+    scene = DentitionScene(dentition, SIZE)
+    scene.update(FrameState.rest(dentition, contact_centers=np.zeros((1, 3)), contact_radii=np.ones(1)))
+    renderer.render(scene, "frontal")
+    cache = renderer._inner._program_cache._program_cache
+    n = len(cache)
+    for _ in range(5):
+        renderer.render(scene, "frontal")
+    assert len(cache) == n

@@ -1,0 +1,101 @@
+"""Files a rendered run leaves behind, the bench record other tools read, and user-facing errors."""
+
+from __future__ import annotations
+
+import json
+
+import imageio.v3 as iio
+import imageio_ffmpeg
+import numpy as np
+import pytest
+
+from orthosim.errors import OrthosimError
+from render.animation import render_run, tile
+from render.bench import SyntheticMotion, run_bench
+from render.cameras import check_view, frame_view
+from render.frame_state import FrameState
+from render.standin import standin_dentition
+
+
+@pytest.fixture(scope="module")
+def dentition():
+    return standin_dentition()
+
+
+def test_run_writes_numbered_frames_video_and_gif(tmp_path, dentition):
+    motion = SyntheticMotion(dentition, n_markers=50)
+    result = render_run(dentition, [motion(i) for i in range(4)], tmp_path, views=("frontal", "maxillary"),
+                        size=(160, 120), gif=True, progress=False)
+    assert result["frames"] == 4 and result["fps"] > 0
+    frames = sorted(p.name for p in (tmp_path / "frames").iterdir())
+    assert frames == ["00000.png", "00001.png", "00002.png", "00003.png"]
+    first = iio.imread(tmp_path / "frames" / "00000.png")
+    assert first.shape == (120, 320, 3)  # two views side by side
+    n_video, _ = imageio_ffmpeg.count_frames_and_secs(str(tmp_path / "animation.mp4"))
+    assert n_video == 4
+    assert (tmp_path / "animation.gif").stat().st_size > 100
+    # nothing temporary left behind
+    assert not [p for p in tmp_path.rglob(".*")]
+
+
+def test_alpha_frames_keep_transparency(tmp_path, dentition):
+    render_run(dentition, [FrameState.rest(dentition)], tmp_path, size=(160, 120), alpha=True, progress=False,
+               mp4=False)
+    image = iio.imread(tmp_path / "frames" / "00000.png")
+    assert image.shape == (120, 160, 4)
+    assert image[0, 0, 3] == 0 and image[:, :, 3].max() == 255
+
+
+def test_odd_image_sizes_still_make_a_video(tmp_path, dentition):
+    render_run(dentition, [FrameState.rest(dentition)] * 2, tmp_path, size=(161, 121), progress=False, png=False)
+    assert (tmp_path / "animation.mp4").stat().st_size > 0
+
+
+def test_unknown_view_is_a_one_line_user_error():
+    with pytest.raises(OrthosimError) as err:
+        check_view("sideways")
+    message = str(err.value)
+    assert "\n" not in message and "sideways" in message and "frontal" in message
+
+
+def test_view_aliases_name_the_clinical_presets():
+    assert check_view("maxillary") == "maxillary_occlusal"
+    assert check_view("mandibular") == "mandibular_occlusal"
+
+
+def test_camera_framing_contains_every_point():
+    pts = np.random.default_rng(0).uniform(-30, 30, size=(500, 3))
+    for name in ("frontal", "left_buccal", "mandibular_occlusal"):
+        view = frame_view(name, pts, (640, 480))
+        px = view.project(pts, (640, 480))
+        assert px[:, 0].min() >= 0 and px[:, 0].max() <= 640
+        assert px[:, 1].min() >= 0 and px[:, 1].max() <= 480
+
+
+def test_tile_places_views_left_to_right():
+    a = np.zeros((2, 3, 3), np.uint8)
+    b = np.full((2, 3, 3), 9, np.uint8)
+    t = tile([a, b])
+    assert t.shape == (2, 6, 3) and t[0, 0, 0] == 0 and t[0, 5, 0] == 9
+
+
+def test_bench_record_follows_the_output_contract(tmp_path, dentition):
+    record = run_bench(dentition=dentition, frames=6, warmup=2, memory_frames=4, variant_rounds=1,
+                       size=(160, 120), n_markers=100)
+    json.dumps(record)  # serialisable as is
+    assert record["machine"]["cores"] >= 1 and record["machine"]["gl_renderer"]
+    assert record["target_fps"] == 40
+    fps = record["fps"]
+    assert set(fps) >= {"simulation", "render", "end_to_end"}
+    assert fps["render"] > 0 and fps["end_to_end"] > 0
+    # no simulation plugged in: reported as missing, never as a number
+    assert fps["simulation"] is None and "simulation" in record["pending"]
+    assert record["memory_mb"]["start"] > 0 and record["memory_mb"]["end"] > 0
+
+
+def test_synthetic_motion_moves_only_the_moving_teeth(dentition):
+    motion = SyntheticMotion(dentition, n_markers=20)
+    rest = dentition.rest_poses()
+    state = motion(30)
+    moved = {f for f in dentition.fdis if not np.allclose(state.poses[f], rest[f])}
+    assert moved == set(motion.moving) and state.n_contacts == 20
