@@ -81,6 +81,32 @@ def check(cases: tuple[Path, ...]) -> None:
         click.echo(f"{path}: ok ({case.name}; {len(case.loads)} loads, {len(case.extractions)} extractions, {case.steps} steps)")
 
 
+@main.command()
+@click.option("--case", "case", type=click.Path(path_type=Path), default=None,
+              help="Case whose model to use (default: the parametric normal-occlusion model).")
+@click.option("--out", "out_file", type=click.Path(path_type=Path), required=True, help="Where to write the JSON record.")
+@click.option("--size", default="640x480", show_default=True, callback=_size, help="Image size WIDTHxHEIGHT.")
+@click.option("--frames", default=300, show_default=True, type=click.IntRange(1), help="Measured frames per figure (after warm-up).")
+@click.option("--warmup", default=30, show_default=True, type=click.IntRange(0), help="Frames run before measuring.")
+@click.option("--markers", default=2000, show_default=True, type=click.IntRange(0), help="Contact markers drawn per frame.")
+@click.option("--memory-frames", default=2000, show_default=True, type=click.IntRange(0),
+              help="Length of the run whose memory is recorded.")
+@click.option("--no-png", is_flag=True, help="End to end without writing PNG frames (MP4 only).")
+def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
+          no_png: bool) -> None:
+    """Measure throughput (render alone, end to end) against the 40 fps target; write JSON."""
+    from render.bench import run_bench
+
+    from .atomic import write_json
+
+    record = run_bench(case, frames=frames, warmup=warmup, size=size, n_markers=markers,
+                       memory_frames=memory_frames, png=not no_png)
+    write_json(out_file, record)
+    fps = record["fps"]
+    shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
+    click.echo(f"fps (median, target {record['target_fps']}): {shown} -> {out_file}")
+
+
 def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> None:
     from .atomic import write_json
     from .case import load_case
