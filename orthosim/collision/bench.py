@@ -20,14 +20,18 @@ from .detect import default_pairs, detect_step
 from .model import CollisionModel
 
 
-def _median_us(fn: Callable[[], object], repeats: int) -> float:
-    fn()  # warm-up (first use builds FCL objects, caches)
-    times = []
+def median_us(fns: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
+    """Median microseconds of each callable, measured round-robin (one call of each in turn) so
+    that load from other processes on a shared machine falls on all of them alike."""
+    for fn in fns.values():
+        fn()  # warm-up (first use builds FCL objects, caches)
+    times = {k: [] for k in fns}
     for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times) * 1e6)
+        for k, fn in fns.items():
+            t0 = time.perf_counter()
+            fn()
+            times[k].append(time.perf_counter() - t0)
+    return {k: float(np.median(v) * 1e6) for k, v in times.items()}
 
 
 def perturbed_poses(poses: Mapping[int, np.ndarray], step_mm: float = 0.1, step_deg: float = 0.2, seed: int = 0) -> dict[int, np.ndarray]:
@@ -78,14 +82,13 @@ def collision_timings(dentition, poses: Mapping[int, np.ndarray] | None = None, 
             hits += res.is_collision
         return hits
 
-    us = {
-        "circles": _median_us(lambda: detect_step(model, poses, pairs=pairs, detector="circles"), repeats),
-        "discrete": _median_us(lambda: detect_step(model, poses, pairs=pairs, detector="discrete", request=all_pairs), repeats),
-        "continuous": _median_us(
-            lambda: detect_step(model, poses, poses_end, pairs=pairs, detector="continuous", request=all_pairs), repeats),
-        "fcl_boolean": _median_us(lambda: fcl_step(False), repeats),
-        "fcl_all_contacts": _median_us(lambda: fcl_step(True), repeats),
-    }
+    us = median_us({
+        "circles": lambda: detect_step(model, poses, pairs=pairs, detector="circles"),
+        "discrete": lambda: detect_step(model, poses, pairs=pairs, detector="discrete", request=all_pairs),
+        "continuous": lambda: detect_step(model, poses, poses_end, pairs=pairs, detector="continuous", request=all_pairs),
+        "fcl_boolean": lambda: fcl_step(False),
+        "fcl_all_contacts": lambda: fcl_step(True),
+    }, repeats)
     disc = detect_step(model, poses, pairs=pairs, detector="discrete", request=all_pairs)
     cont = detect_step(model, poses, poses_end, pairs=pairs, detector="continuous", request=all_pairs)
     return {

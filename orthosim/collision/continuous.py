@@ -22,15 +22,17 @@ from . import exact
 from .descent import descend
 from .model import FLOAT32_MARGIN_MM, CollisionModel
 from .motion import chord_deviation_bound, interpolate_pose, max_speed, rotation_angle
-from .time_of_contact import contact_interval, min_distance_over_step
+from .time_of_contact import contact_interval, contact_interval_from_dots, min_distance_over_step
 
 
-def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, pair_idx: np.ndarray, first_only: bool = False):
+def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, pair_idx: np.ndarray, first_only: bool = False,
+                 world0: np.ndarray | None = None):
     """(pair, node a, node b, t, leave): leaf pairs that may touch in the step, Eq. 2's first time.
 
     poses0, poses1: (n, 4, 4) poses at t = 0 and t = 1 in model body order; pair_idx (p, 2).
     t: (m,) in [0, 1), never later than the first contact of the leaves' contents; leave: (m,)
-    when the (inflated) spheres stop overlapping along their chords.
+    when the (inflated) spheres stop overlapping along their chords. world0: the
+    `model.world_centers(poses0)` when the caller has it already.
 
     Every node is placed at both ends by two batched matrix products (arch frame). Node pairs are
     pruned with the swept-sphere bound: a node's chord lies in the sphere about its midpoint M of
@@ -38,12 +40,12 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
     bound like the paper's interval arithmetic, tested on float32 arrays as in `discrete`. Leaf
     pairs that pass get the exact closed-form test and Eq. 2 in float64.
     """
-    W0 = model.world_centers(poses0)
-    D = model.world_centers(poses1) - W0  # chord of every node centre
+    W0T = model.world_centers(poses0) if world0 is None else world0  # (3, N)
+    DT = model.world_centers(poses1) - W0T  # chord of every node centre
     inflate = np.repeat(chord_deviation_bound(rotation_angle(poses0, poses1), 1.0), model.width)
     R = model.radii + inflate * model.rho  # radius grown by the node centre's largest chord deviation
-    X, Y, Z = (W0 + 0.5 * D).T.astype(np.float32)
-    Rs = (R + 0.5 * np.linalg.norm(D, axis=1) + FLOAT32_MARGIN_MM).astype(np.float32)
+    X, Y, Z = (W0T + 0.5 * DT).astype(np.float32)
+    Rs = (R + 0.5 * np.sqrt((DT * DT).sum(axis=0)) + FLOAT32_MARGIN_MM).astype(np.float32)
 
     def may_touch(pair, na, nb):
         dx = X[na] - X[nb]
@@ -52,10 +54,17 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
         s = Rs[na] + Rs[nb]
         return dx * dx + dy * dy + dz * dz <= s * s
 
-    def chords(pair, na, nb):
-        return W0[na] - W0[nb], D[na] - D[nb], R[na] + R[nb]
+    def at_leaves(pair, na, nb):
+        ax, ay, az = W0T[:, na] - W0T[:, nb]
+        bx, by, bz = DT[:, na] - DT[:, nb]
+        rr = R[na] + R[nb]
+        enter, leave = contact_interval_from_dots(ax * ax + ay * ay + az * az, ax * bx + ay * by + az * bz,
+                                                  bx * bx + by * by + bz * bz, rr * rr)
+        ok = ~np.isnan(enter)
+        return ok, {"t": enter, "leave": leave}
 
-    return _sweep(model, pair_idx, chords, first_only, may_touch)
+    pair, la, lb, payload = descend(model, pair_idx, may_touch, at_leaves, first_only)
+    return pair, la, lb, payload.get("t", np.zeros(0)), payload.get("leave", np.zeros(0))
 
 
 def swept_leaves_posed(model: CollisionModel, pair_idx: np.ndarray, Ta0, Ta1, Tb0, Tb1, first_only: bool = False):
@@ -82,11 +91,10 @@ def swept_leaves_posed(model: CollisionModel, pair_idx: np.ndarray, Ta0, Ta1, Tb
     return _sweep(model, pair_idx, chords, first_only, track_pair=True)
 
 
-def _sweep(model, pair_idx, chords, first_only, may_touch=None, track_pair=False):
-    if may_touch is None:
-        def may_touch(pair, na, nb):
-            A, B, R = chords(pair, na, nb)
-            return min_distance_over_step(A, B) <= R
+def _sweep(model, pair_idx, chords, first_only, track_pair=False):
+    def may_touch(pair, na, nb):
+        A, B, R = chords(pair, na, nb)
+        return min_distance_over_step(A, B) <= R
 
     def at_leaves(pair, na, nb):
         enter, leave = contact_interval(*chords(pair, na, nb))

@@ -30,7 +30,7 @@ def default_pairs(model: CollisionModel, poses: np.ndarray | None = None, absent
     if all(fdi_mod.is_fdi(k) for k in keys):
         return candidate_pairs(keys, absent)
     P = np.stack([b.rest_pose for b in model.bodies]) if poses is None else poses
-    c = np.einsum("nij,nj->ni", P[:, :3, :3], model.centers[:, 0]) + P[:, :3, 3]
+    c = model.world_centers(P)[:, model.roots(np.arange(len(keys)))].T
     idx = sweep_and_prune(c, model.radii[model.roots(np.arange(len(keys)))])
     return [(keys[i], keys[j]) for i, j in idx]
 
@@ -67,26 +67,35 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
         touching[pair] = True
         return StepResult("discrete", pairs_arr, touching, nan, **_leaf_arrays(model, pair_idx, pair, la, lb, P1, P1, W=W))
     # continuous
-    pair, la, lb, t, leave = swept_leaves(model, P0, P1, pair_idx, first_only)
-    toc = nan.copy()
-    if len(pair):
-        order = np.lexsort((t, pair))
-        first = order[np.unique(pair[order], return_index=True)[1]]
-        toc[pair[first]] = t[first]
+    W0 = model.world_centers(P0)
+    pair, la, lb, t, leave = swept_leaves(model, P0, P1, pair_idx, first_only, world0=W0)
+    toc = np.full(p, np.inf)
+    np.minimum.at(toc, pair, t)
+    toc[np.isinf(toc)] = np.nan
     if request.refine_time_of_contact:
         for i in np.flatnonzero(~np.isnan(toc)):
             a, b = pair_idx[i]
-            toc[i] = np.nan if (r := refine_time_of_contact(
-                model, a, b, P0[a], P1[a], P0[b], P1[b], toc[i], request.contact_tolerance_mm)) is None else r
+            r = refine_time_of_contact(model, a, b, P0[a], P1[a], P0[b], P1[b], toc[i], request.contact_tolerance_mm)
+            toc[i] = np.nan if r is None else r
     # the contact regions drawn are the leaf pairs overlapping when their pair first touches
     at = toc[pair]
     live = (t <= at) & (at <= leave)
     pair, la, lb = pair[live], la[live], lb[live]
     touching = ~np.isnan(toc)
-    # leaf centres drawn where each pair first touches
-    ta = interpolate_poses(P0[pair_idx[:, 0]], P1[pair_idx[:, 0]], np.nan_to_num(toc))
-    tb = interpolate_poses(P0[pair_idx[:, 1]], P1[pair_idx[:, 1]], np.nan_to_num(toc))
-    return StepResult("continuous", pairs_arr, touching, toc, **_leaf_arrays(model, pair_idx, pair, la, lb, ta, tb, per_pair=True))
+    leaves = _leaf_arrays(model, pair_idx, pair, la, lb, P0, P0, W=W0)
+    # pairs first touching after t = 0: their leaves drawn at the poses of that time
+    moved = np.flatnonzero(touching & (toc > 0))
+    if len(moved):
+        ia, ib = pair_idx[moved, 0], pair_idx[moved, 1]
+        Ta = np.repeat(P0[:1], p, axis=0)
+        Tb = Ta.copy()
+        Ta[moved] = interpolate_poses(P0[ia], P1[ia], toc[moved])
+        Tb[moved] = interpolate_poses(P0[ib], P1[ib], toc[moved])
+        sel = np.flatnonzero(toc[pair] > 0)
+        redo = _leaf_arrays(model, pair_idx, pair[sel], la[sel], lb[sel], Ta, Tb, per_pair=True)
+        leaves["centers_a"][sel] = redo["centers_a"]
+        leaves["centers_b"][sel] = redo["centers_b"]
+    return StepResult("continuous", pairs_arr, touching, toc, **leaves)
 
 
 def _leaf_arrays(model, pair_idx, pair, la, lb, Pa, Pb, per_pair=False, W=None):
@@ -94,7 +103,7 @@ def _leaf_arrays(model, pair_idx, pair, la, lb, Pa, Pb, per_pair=False, W=None):
     tooth pair (per_pair) when each pair is drawn at its own time; W: world centres if known."""
     ia, ib = pair_idx[pair, 0], pair_idx[pair, 1]
     if W is not None:
-        ca, cb = W[la], W[lb]
+        ca, cb = np.ascontiguousarray(W[:, la].T), np.ascontiguousarray(W[:, lb].T)
     else:
         A = Pa[pair] if per_pair else Pa[ia]
         B = Pb[pair] if per_pair else Pb[ib]

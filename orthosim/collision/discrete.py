@@ -23,7 +23,7 @@ def overlapping_leaves(model: CollisionModel, poses: np.ndarray, pair_idx: np.nd
     poses: (n, 4, 4) local -> arch frame in model body order; pair_idx: (p, 2) body indices;
     world: `model.world_centers(poses)` when the caller has it already.
     """
-    X, Y, Z = (model.world_centers(poses) if world is None else world).T.astype(np.float32)
+    X, Y, Z = (model.world_centers(poses) if world is None else world).astype(np.float32)
     r = model.radii32
 
     def may_touch(pair, na, nb):

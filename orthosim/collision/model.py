@@ -84,6 +84,7 @@ class CollisionModel:
                 self.child_count[sl] = np.diff(off)
             self.leaf_index[base + level_start[-2] : base + level_start[-1]] = np.arange(tree.n_leaves)
         self.rho = np.linalg.norm(self.centers, axis=2).reshape(-1)
+        self._centers_by_axis = np.ascontiguousarray(np.moveaxis(self.centers, 2, 0))  # (3, n, width)
         self.radii32 = (self.radii + FLOAT32_MARGIN_MM).astype(np.float32)
         self._circle = _circle_data(self.bodies)
         self.rho_max = np.array([np.linalg.norm(b.mesh.vertices, axis=1).max() for b in self.bodies])
@@ -94,9 +95,14 @@ class CollisionModel:
         return np.asarray(body_idx, np.int64) * self.width
 
     def world_centers(self, poses: np.ndarray) -> np.ndarray:
-        """(n_bodies * width, 3) mm: every node centre in the arch frame under poses (n, 4, 4)."""
-        W = self.centers @ np.transpose(poses[:, :3, :3], (0, 2, 1)) + poses[:, None, :3, 3]
-        return W.reshape(-1, 3)
+        """(3, n_bodies * width) mm: every node centre in the arch frame under poses (n, 4, 4),
+        one row per axis (the descent gathers from contiguous rows)."""
+        c = self._centers_by_axis
+        R, p = poses[:, :3, :3], poses[:, :3, 3]
+        out = np.empty((3,) + c.shape[1:])
+        for i in range(3):  # nine (n, width) multiply-adds: far faster than a batched 3x3 matmul
+            out[i] = c[0] * R[:, i, 0, None] + c[1] * R[:, i, 1, None] + c[2] * R[:, i, 2, None] + p[:, i, None]
+        return out.reshape(3, -1)
 
     @property
     def depth(self) -> int:

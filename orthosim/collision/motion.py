@@ -32,8 +32,14 @@ def rotation_vector(T0: np.ndarray, T1: np.ndarray) -> np.ndarray:
 
 
 def rotation_angle(T0: np.ndarray, T1: np.ndarray) -> np.ndarray:
-    """(...,) radians turned between the two poses, in [0, pi]."""
-    return np.linalg.norm(rotation_vector(T0, T1), axis=-1)
+    """(...,) radians turned between the two poses, in [0, pi].
+
+    From |R1 - R0|_F = 2 sqrt(2) sin(theta / 2), which stays accurate for tiny turns (unlike the
+    trace formula) and needs no matrix logarithm.
+    """
+    D = np.asarray(T1, float)[..., :3, :3] - np.asarray(T0, float)[..., :3, :3]
+    s = np.sqrt(np.einsum("...ij,...ij->...", D, D)) / (2.0 * np.sqrt(2.0))
+    return 2.0 * np.arcsin(np.minimum(s, 1.0))
 
 
 def interpolate_pose(T0: np.ndarray, T1: np.ndarray, t: float | np.ndarray) -> np.ndarray:

@@ -21,19 +21,7 @@ def first_time_of_contact(A: np.ndarray, B: np.ndarray, R: np.ndarray) -> np.nda
     Already overlapping at t = 0 gives 0; no relative motion, or motion parallel to the contact
     plane that never closes the gap, gives NaN; touching exactly at t = 1 is outside [0, 1): NaN.
     """
-    A = np.asarray(A, float)
-    B = np.asarray(B, float)
-    R = np.asarray(R, float)
-    aa = np.einsum("ij,ij->i", A, A)
-    ab = np.einsum("ij,ij->i", A, B)
-    bb = np.einsum("ij,ij->i", B, B)
-    gap = aa - R * R  # > 0: apart at t = 0
-    disc = ab * ab - bb * gap
-    closing = (ab < 0) & (disc >= 0) & (gap > 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = gap / (-ab + np.sqrt(np.where(closing, disc, 0.0)))
-    t = np.where(closing & (t < 1.0), t, np.nan)
-    return np.where(gap <= 0, 0.0, t)
+    return contact_interval(A, B, R)[0]
 
 
 def contact_interval(A: np.ndarray, B: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -42,15 +30,24 @@ def contact_interval(A: np.ndarray, B: np.ndarray, R: np.ndarray) -> tuple[np.nd
     enter is `first_time_of_contact` (NaN when they do not meet in [0, 1)); leave is the second
     root of |A + t B| = R (inf when there is no relative motion), NaN where enter is NaN.
     """
-    enter = first_time_of_contact(A, B, R)
     A = np.asarray(A, float)
     B = np.asarray(B, float)
     R = np.asarray(R, float)
-    ab = np.einsum("ij,ij->i", A, B)
-    bb = np.einsum("ij,ij->i", B, B)
-    disc = ab * ab - bb * (np.einsum("ij,ij->i", A, A) - R * R)
+    return contact_interval_from_dots(np.einsum("ij,ij->i", A, A), np.einsum("ij,ij->i", A, B),
+                                      np.einsum("ij,ij->i", B, B), R * R)
+
+
+def contact_interval_from_dots(aa: np.ndarray, ab: np.ndarray, bb: np.ndarray, rr: np.ndarray):
+    """`contact_interval` from the dot products |A|^2, A.B, |B|^2 and R^2 (all (n,), mm^2)."""
+    gap = aa - rr  # > 0: apart at t = 0
+    disc = ab * ab - bb * gap
+    root = np.sqrt(np.maximum(disc, 0.0))
+    closing = (ab < 0) & (disc >= 0) & (gap > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        leave = np.where(bb > 0, (-ab + np.sqrt(np.maximum(disc, 0.0))) / bb, np.inf)
+        enter = gap / (-ab + root)  # Eq. 2, cancellation-free
+        leave = np.where(bb > 0, (-ab + root) / bb, np.inf)
+    enter = np.where(closing & (enter < 1.0), enter, np.nan)
+    enter = np.where(gap <= 0, 0.0, enter)
     return enter, np.where(np.isnan(enter), np.nan, leave)
 
 
