@@ -149,6 +149,11 @@ def _render_initial(dent, poses, extracted, out_dir: Path, opts: dict) -> dict:
                       hide_roots=opts.get("hide_roots", False))
 
 
+from .collision.commands import collide  # noqa: E402  (issue 5: orthosim collide validate|bench|step)
+
+main.add_command(collide)
+
+
 def entry() -> None:
     """Console-script entry: run the CLI, turning user errors into one line and an exit code."""
     try:

@@ -1,0 +1,94 @@
+"""`orthosim collide ...`: the collision detectors' accuracy report, timings and a one-step query.
+
+Registered on the main CLI by `main.add_command(collide)` in `orthosim/cli.py`.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from .contract import DETECTORS, CollisionRequest
+
+DEFAULT_REAL = "/work/shared/data/open-full-jaw-patient26/maxilla"
+
+
+@click.group()
+def collide() -> None:
+    """Collision detection: accuracy studies against the exact mesh test, timings, one query."""
+
+
+@collide.command()
+@click.option("--out", "out_file", type=click.Path(path_type=Path), default=Path("out/collision_validation.json"),
+              show_default=True, help="JSON report to write.")
+@click.option("--poses", type=click.IntRange(1), default=10000, show_default=True,
+              help="Random near-contact poses for the discrete study (split across tooth sets).")
+@click.option("--motions", type=click.IntRange(1), default=2000, show_default=True,
+              help="Random motions over one step for the continuous study (split across tooth sets).")
+@click.option("--samples", type=click.IntRange(10), default=400, show_default=True,
+              help="Exact collision tests per step for the continuous ground truth.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--real-folder", type=click.Path(path_type=Path), default=Path(DEFAULT_REAL), show_default=True,
+              help="Open-Full-Jaw maxilla folder; its teeth are studied when it exists.")
+def validate(out_file: Path, poses: int, motions: int, samples: int, seed: int, real_folder: Path) -> None:
+    """Sphere-tree detectors vs the exact mesh test: misses, false-positive rates, contact times."""
+    from .validate import run_validation
+
+    report = run_validation(out_file, n_poses=poses, n_motions=motions, seed=seed, real_folder=real_folder,
+                            samples=samples)
+    click.echo(json.dumps(_headline(report), indent=1))
+    click.echo(f"report written to {out_file}")
+
+
+def _headline(report: dict) -> dict:
+    out = {}
+    for name, res in report["discrete"]["sets"].items():
+        far = report["discrete_far"]["sets"][name]["false_positive_rate"]
+        out[f"discrete/{name}"] = {"poses": res["poses"], "false_negatives": res["false_negatives"],
+                                  "fp_rate": {**{k: v["rate"] for k, v in res["false_positive_rate"].items()},
+                                              "far_>0.5mm": far[">0.5mm"]["rate"]}}
+    for name, res in report["continuous"]["sets"].items():
+        a = res["by_kind"]["all"]
+        out[f"continuous/{name}"] = {k: a[k] for k in ("motions", "exact_contacts", "missed_by_sphere_trees",
+                                                      "later_than_exact_refined", "refined_within_tolerance")}
+    return out
+
+
+@collide.command()
+@click.option("--out", "out_file", type=click.Path(path_type=Path), default=None, help="Also write the JSON here.")
+@click.option("--resolution", type=click.Choice(["coarse", "smooth"]), default="smooth", show_default=True,
+              help="Parametric model resolution.")
+@click.option("--repeats", type=click.IntRange(1), default=50, show_default=True)
+def bench(out_file: Path | None, resolution: str, repeats: int) -> None:
+    """Microseconds per whole-arch step of every detector and of python-fcl, same pairs, one run."""
+    from ..parametric import parametric_dentition
+    from .bench import collision_timings
+
+    res = collision_timings(parametric_dentition(resolution=resolution), repeats=repeats)
+    res["model"] = f"parametric {resolution}, rest poses"
+    text = json.dumps(res, indent=1)
+    click.echo(text)
+    if out_file is not None:
+        from ..atomic import write_text
+
+        write_text(out_file, text)
+
+
+@collide.command()
+@click.option("--detector", type=click.Choice(DETECTORS), default="discrete", show_default=True)
+@click.option("--resolution", type=click.Choice(["coarse", "smooth"]), default="coarse", show_default=True)
+def step(detector: str, resolution: str) -> None:
+    """One whole-arch query on the parametric model at rest: which teeth touch."""
+    from ..parametric import parametric_dentition
+    from .detect import detect_step
+    from .model import CollisionModel
+
+    d = parametric_dentition(resolution=resolution)
+    model = CollisionModel.from_dentition(d)
+    poses = d.rest_poses()
+    res = detect_step(model, poses, poses, detector=detector, request=CollisionRequest())
+    click.echo(json.dumps({"detector": detector, "candidate_pairs": len(res.pairs),
+                           "touching": [list(p) for p in res.touching_pairs()],
+                           "leaf_pairs": int(len(res.leaf_pairs))}))
