@@ -118,12 +118,13 @@ def _render_variants(dentition, states, size, frames_per_round: int, rounds: int
                                "pyrender's own forward pass and physically based shaders, markers as icospheres"),
         "stock_pass_lambert": (dict(lean=False), dict(marker_style="mesh"),
                                "our per-pixel Lambert shaders in pyrender's stock forward pass, icosphere markers"),
-        "lean_pass_pixel_lit": (dict(lighting="pixel"), dict(marker_style="mesh"),
+        "lean_pass_pixel_lit": (dict(lighting="pixel", static_cache=False), dict(marker_style="mesh"),
                                 "+ lean forward pass (program, camera, lights bound once per frame)"),
-        "lean_pass_vertex_lit": (dict(lighting="vertex"), dict(marker_style="mesh"),
+        "lean_pass_vertex_lit": (dict(lighting="vertex", static_cache=False), dict(marker_style="mesh"),
                                  "+ lighting per vertex instead of per pixel"),
-        "shipped": (dict(), dict(), "+ markers as point sprites (the default configuration)"),
-        "shipped_msaa4": (dict(msaa=True), dict(), "the default with 4x multisampling and glReadPixels"),
+        "sprite_markers": (dict(static_cache=False), dict(), "+ markers as point sprites instead of icospheres"),
+        "shipped": (dict(), dict(), "+ static teeth drawn once into a cached colour+depth image (the default)"),
+        "shipped_msaa4": (dict(msaa=True), dict(), "the default with 4x multisampling (no static cache)"),
     }
     setups = {}
     for name, (ropts, sopts, _) in variants.items():

@@ -37,6 +37,14 @@ def _lean_renderer_class(pyrender, GL):
         def __init__(self, *args, lighting: str = "vertex", **kwargs):
             super().__init__(*args, **kwargs)
             self._locations: dict[tuple[int, str], int] = {}
+            self._fbos: dict = {}
+            self._cache_keys: dict = {}  # view -> key of the static image held in its cache
+            self._previous_keys: dict = {}  # view -> static key of the previous frame
+            self.static_nodes = None  # set per frame by Renderer.render
+            self.static_key = None
+            self.cache_name = None
+            self.cache_hits = self.cache_builds = 0
+            self._readback = np.empty((self.viewport_height, self.viewport_width, 4), np.uint8)
             self._shader_files = ("gouraud.vert", "gouraud.frag") if lighting == "vertex" else ("mesh.vert", "mesh.frag")
 
         def _program_for(self, primitive, n_lights: int):
@@ -84,14 +92,43 @@ def _lean_renderer_class(pyrender, GL):
                 GL.glDrawArraysInstanced(GL.GL_POINTS, 0, len(primitive.positions), 1)
             GL.glDisable(GL.GL_PROGRAM_POINT_SIZE)
 
-        def _forward_pass(self, scene, flags, seg_node_map=None):
-            self._configure_forward_pass_viewport(flags)
-            GL.glClearColor(*scene.bg_color)
-            GL.glClear(GL.GL_COLOR_BUFFER_BIT | GL.GL_DEPTH_BUFFER_BIT)
+        # ---- frame buffers we own: colour RGBA8 + depth 24, identical formats so blits are exact
+        def _fbo(self, name):
+            fbo = self._fbos.get(name)
+            if fbo is None:
+                w, h = self.viewport_width, self.viewport_height
+                cb, db = GL.glGenRenderbuffers(2)
+                GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, cb)
+                GL.glRenderbufferStorage(GL.GL_RENDERBUFFER, GL.GL_RGBA8, w, h)
+                GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, db)
+                GL.glRenderbufferStorage(GL.GL_RENDERBUFFER, GL.GL_DEPTH_COMPONENT24, w, h)
+                fb = GL.glGenFramebuffers(1)
+                GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, fb)
+                GL.glFramebufferRenderbuffer(GL.GL_FRAMEBUFFER, GL.GL_COLOR_ATTACHMENT0, GL.GL_RENDERBUFFER, cb)
+                GL.glFramebufferRenderbuffer(GL.GL_FRAMEBUFFER, GL.GL_DEPTH_ATTACHMENT, GL.GL_RENDERBUFFER, db)
+                fbo = self._fbos[name] = (fb, cb, db)
+            return fbo
+
+        def delete_fbos(self):
+            for fb, cb, db in self._fbos.values():
+                GL.glDeleteFramebuffers(1, [fb])
+                GL.glDeleteRenderbuffers(2, [cb, db])
+            self._fbos.clear()
+            self._cache_keys.clear()
+
+        def _begin(self, fb, clear_color=None):
+            GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, fb)
+            GL.glViewport(0, 0, self.viewport_width, self.viewport_height)
+            GL.glEnable(GL.GL_DEPTH_TEST)
+            GL.glDepthMask(GL.GL_TRUE)
+            GL.glDepthFunc(GL.GL_LESS)
             GL.glDisable(GL.GL_BLEND)  # every surface we draw is opaque
             GL.glPolygonMode(GL.GL_FRONT_AND_BACK, GL.GL_FILL)
-            if flags & pyrender.RenderFlags.OFFSCREEN:
-                GL.glEnable(GL.GL_MULTISAMPLE)
+            if clear_color is not None:
+                GL.glClearColor(*clear_color)
+                GL.glClear(GL.GL_COLOR_BUFFER_BIT | GL.GL_DEPTH_BUFFER_BIT)
+
+        def _frame_constants(self, scene):
             V, P = self._get_camera_matrices(scene)
             cam_pos = scene.get_pose(scene.main_camera_node)[:3, 3].astype(np.float32)
             VP = np.ascontiguousarray(V.T, dtype=np.float32), np.ascontiguousarray(P.T, dtype=np.float32)
@@ -101,20 +138,16 @@ def _lean_renderer_class(pyrender, GL):
             for ln in sorted(scene.directional_light_nodes, key=lambda n: n.name or ""):
                 pose = scene.get_pose(ln)
                 lights.append((-pose[:3, 2], ln.light.color, float(ln.light.intensity)))
+            return VP, cam_pos, lights
+
+        def _draw(self, scene, nodes, VP, cam_pos, lights) -> None:
+            """Draw `nodes` ((node, pose) pairs, already in draw order): surfaces, then marker sprites."""
             bound_program = None
             cull = None
-            # Nearest first: the depth test then rejects hidden fragments before they are shaded.
-            nodes = []
-            for node in scene.mesh_nodes:
-                if node.mesh.is_visible:
-                    pose = scene.get_pose(node)
-                    nodes.append((float(np.sum((pose[:3, 3] - cam_pos) ** 2)), node.name or "", node, pose))
-            nodes.sort(key=lambda item: item[:2])
             sprites = []
-            for _, _, node, pose in nodes:
-                mesh = node.mesh
+            for node, pose in nodes:
                 M = np.ascontiguousarray(pose.T, dtype=np.float32)
-                for primitive in mesh.primitives:
+                for primitive in node.mesh.primitives:
                     if primitive.mode == pyrender.GLTF.POINTS:
                         sprites.append((primitive, M))  # after the opaque surfaces they sit on
                         continue
@@ -153,10 +186,62 @@ def _lean_renderer_class(pyrender, GL):
                 self._draw_sprites(sprites, VP)
             GL.glBindVertexArray(0)
             GL.glUseProgram(0)
-            GL.glFlush()
-            if flags & pyrender.RenderFlags.OFFSCREEN:
+
+        def _forward_pass(self, scene, flags, seg_node_map=None):
+            VP, cam_pos, lights = self._frame_constants(scene)
+            # Nearest first: the depth test then rejects hidden fragments before they are shaded.
+            # Static teeth (see Renderer.render) always before the others, in the cached and the
+            # uncached path alike, so that both produce the same pixels.
+            static = self.static_nodes or frozenset()
+            order = []
+            for node in scene.mesh_nodes:
+                if node.mesh.is_visible:
+                    pose = scene.get_pose(node)
+                    d2 = float(np.sum((pose[:3, 3] - cam_pos) ** 2))
+                    order.append((node not in static, d2, node.name or "", node, pose))
+            order.sort(key=lambda item: item[:3])
+            nodes = [(item[3], item[4]) for item in order]
+            n_static = sum(1 for item in order if not item[0])
+
+            if flags & pyrender.RenderFlags.OFFSCREEN:  # multisampled path through pyrender's buffers
+                self._configure_forward_pass_viewport(flags)
+                self._begin(self._main_fb_ms, scene.bg_color)
+                GL.glEnable(GL.GL_MULTISAMPLE)
+                self._draw(scene, nodes, VP, cam_pos, lights)
+                GL.glFlush()
                 return self._read_main_framebuffer(scene, flags)
-            return None
+
+            work = self._fbo("work")[0]
+            key = self.static_key
+            view = self.cache_name
+            stable = key is not None and n_static > 0 and (
+                self._cache_keys.get(view) == key or self._previous_keys.get(view) == key)
+            self._previous_keys[view] = key
+            if stable:
+                # Static teeth drawn once into a cached colour+depth image; each frame starts from
+                # a copy of it and draws only what moved.
+                cache = self._fbo(("cache", view))[0]
+                if self._cache_keys.get(view) != key:
+                    self._begin(cache, scene.bg_color)
+                    self._draw(scene, nodes[:n_static], VP, cam_pos, lights)
+                    self._cache_keys[view] = key
+                    self.cache_builds += 1
+                GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, cache)
+                GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, work)
+                w, h = self.viewport_width, self.viewport_height
+                GL.glBlitFramebuffer(0, 0, w, h, 0, 0, w, h, GL.GL_COLOR_BUFFER_BIT | GL.GL_DEPTH_BUFFER_BIT,
+                                     GL.GL_NEAREST)
+                self._begin(work)
+                self._draw(scene, nodes[n_static:], VP, cam_pos, lights)
+                self.cache_hits += 1
+            else:
+                self._begin(work, scene.bg_color)
+                self._draw(scene, nodes, VP, cam_pos, lights)
+            GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, work)
+            w, h = self.viewport_width, self.viewport_height
+            GL.glReadPixels(0, 0, w, h, GL.GL_RGBA, GL.GL_UNSIGNED_BYTE, self._readback)
+            GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+            return self._readback
 
     return LeanRenderer
 
@@ -165,7 +250,7 @@ class Renderer:
     """Offscreen renderer of fixed image size; use as a context manager or call `close()`."""
 
     def __init__(self, size: tuple[int, int] = (640, 480), *, alpha: bool = False, msaa: bool = False,
-                 shading: str = "lambert", lean: bool = True, lighting: str = "vertex"):
+                 shading: str = "lambert", lean: bool = True, lighting: str = "vertex", static_cache: bool = True):
         """`shading` "pbr" (pyrender's own shaders) and `lean=False` (pyrender's stock forward pass)
         exist only so that the bench can measure what each optimisation buys."""
         pyrender = load_pyrender()
@@ -191,6 +276,7 @@ class Renderer:
         self.shading = shading
         self.lean = lean
         self.lighting = lighting if lean else "pixel"
+        self.static_cache = static_cache and lean and not msaa
         self._seen_versions: dict[object, int] = {}
         self._instance_capacity: dict[object, int] = {}
         self._flags = pyrender.RenderFlags.NONE
@@ -224,9 +310,13 @@ class Renderer:
             scene.set_view(view)
         self._platform.make_current()
         self._sync_buffers(scene)
+        if self.lean:
+            self._mark_static(scene)
         out = self._inner.render(scene.scene, self._flags)
         if self.msaa:
             rgba = out
+        elif self.lean:
+            rgba = out[::-1]  # GL returns the bottom row first
         else:
             self._GL.glFinish()
             buf = np.asarray(self._platform._buffer)  # (h, w, 4) uint8, OSMesa's own colour buffer
@@ -235,6 +325,29 @@ class Renderer:
         if self.alpha:
             return np.ascontiguousarray(rgba)
         return np.ascontiguousarray(rgba[:, :, :3])
+
+    def _mark_static(self, scene) -> None:
+        """Tell the forward pass which teeth can come from its cached image, and under what key.
+
+        Static: visible, not moving in the current state, vertex colours not painted by contacts.
+        The key holds everything that changes how those teeth look (scene, view, their poses, tint
+        and buffer versions): the cache is redrawn whenever any of it changes, so the cache can
+        make a frame faster but never different.
+        """
+        inner = self._inner
+        if not self.static_cache or scene.state is None:
+            inner.static_nodes = inner.static_key = None
+            return
+        moving = scene.state.moving
+        static = [d for fdi, d in scene.teeth.items() if d.mesh.is_visible and fdi not in moving and not d.painted]
+        view = scene.current_view.name
+        versions = scene.buffer_versions
+        key = (scene.uid, view, tuple(d.fdi for d in static), tuple(d.tinted for d in static),
+               tuple(versions.get(d.primitive, 0) for d in static),
+               b"".join(np.asarray(d.node._matrix, np.float64).tobytes() for d in static))
+        inner.static_nodes = frozenset(d.node for d in static)
+        inner.static_key = key
+        inner.cache_name = (scene.uid, view)
 
     def _read_msaa_colour(self, scene, flags):
         GL = self._GL
@@ -306,6 +419,8 @@ class Renderer:
         if self._platform is None:
             return
         self._platform.make_current()
+        if self.lean:
+            self._inner.delete_fbos()
         self._inner.delete()
         self._platform.delete_context()
         self._platform = None

@@ -15,6 +15,8 @@ the GL context, uploads what changed before drawing.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
@@ -45,6 +47,7 @@ LIGHT_RIG = (
     ((0.00, 0.80, -0.60), (1.00, 1.00, 1.00), 0.14),
 )
 ENAMEL_ROUGHNESS = 0.5  # weak specular highlight (see shaders/mesh.frag)
+_scene_ids = itertools.count(1)
 
 
 def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: bool):
@@ -110,6 +113,7 @@ class DentitionScene:
         """`marker_style`: "sprite" draws each contact sphere as a ray-cast point sprite (cheap at
         thousands of markers); "mesh" as an instanced 80-triangle icosphere (kept for comparison)."""
         pyrender = load_pyrender()
+        self.uid = next(_scene_ids)  # names this scene in the renderer's caches
         self.dentition = dentition
         self.size = (int(size[0]), int(size[1]))
         self.hide_roots = hide_roots

@@ -209,3 +209,28 @@ def test_shader_programs_are_compiled_once_not_per_frame(renderer, dentition):
     for _ in range(5):
         renderer.render(scene, "frontal")
     assert len(cache) == n
+
+
+def test_static_image_cache_changes_speed_not_pixels(dentition):
+    """Teeth that do not move are drawn once and reused; frames must equal a full redraw."""
+    from render.bench import SyntheticMotion
+
+    motion = SyntheticMotion(dentition, n_markers=200, period=8)
+    with Renderer(SIZE) as cached, Renderer(SIZE, static_cache=False) as plain:
+        a_scene, b_scene = DentitionScene(dentition, SIZE), DentitionScene(dentition, SIZE)
+        for i in range(6):
+            state = motion(i)
+            a_scene.update(state)
+            b_scene.update(state)
+            for view in ("frontal", "left_buccal"):
+                assert np.array_equal(cached.render(a_scene, view), plain.render(b_scene, view)), (i, view)
+        assert cached._inner.cache_hits > 0
+        # a static tooth that moves invalidates the cached image
+        poses = dict(state.poses)
+        poses[26] = poses[26].copy()
+        poses[26][:3, 3] += [0.0, 0.0, 1.5]
+        moved = FrameState(poses=poses, moving=state.moving)
+        for _ in range(3):
+            a_scene.update(moved)
+            b_scene.update(moved)
+            assert np.array_equal(cached.render(a_scene, "frontal"), plain.render(b_scene, "frontal"))
