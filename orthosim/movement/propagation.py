@@ -1,0 +1,87 @@
+"""Forces passed on between touching teeth: the paper's "part of its force passes to the tooth it hit".
+
+For every pair of touching teeth (i, j), n_ij is the unit vector from i toward j: between the crown
+centres in the occlusal (x-z) plane for neighbours along an arch, and vertical for upper-versus-lower
+(occlusal) contacts, which only stop and pass on vertical movement. When the force on i pushes into
+j (F_i . n_ij > 0), j receives the share s of that component along n_ij and i is blocked in that
+direction. What j receives adds to its own force and may be passed on again, down the arch, while
+the force on the passing tooth is still enough to move it (above the rate law's threshold). The
+fixed point is found by iteration; it exists because s < 1 (forces decay geometrically along a
+chain). Two chains pushing toward each other meet with opposite forces and block each other, which
+is what keeps the incisors in place when both sides of an arch are loaded.
+
+Forces in cN, arch frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class ForceBalance:
+    """The forces of one step (cN, arch frame), per tooth FDI.
+
+    applied: the user's loads; received: passed on by touching teeth; total = applied + received;
+    free: what is left to move the tooth once the components pushing into touching teeth are taken out.
+    blocked_by: tooth -> the teeth it pushes into (and so cannot move toward).
+    passed: (from, to) -> the force vector (cN) passed on.
+    """
+
+    applied: dict[int, np.ndarray]
+    received: dict[int, np.ndarray]
+    total: dict[int, np.ndarray]
+    free: dict[int, np.ndarray]
+    blocked_by: dict[int, list[int]]
+    passed: dict[tuple[int, int], np.ndarray]
+
+
+def propagate(applied: Mapping[int, np.ndarray], contacts: Sequence[tuple[int, int, np.ndarray]], share: float,
+              can_pass: Callable[[int, float], bool], iterations: int = 200, tol_cN: float = 1e-6) -> ForceBalance:
+    """Pass forces through touching teeth to a fixed point (see the module text).
+
+    applied: FDI -> (3,) cN. contacts: (i, j, n_ij) for each touching pair, n_ij (3,) unit from i to j
+    (the pair need not be listed both ways). share: fraction (0..1) of the pushing component passed
+    on. can_pass(fdi, |F| cN): whether a tooth under this force passes any of it on.
+    """
+    if not 0.0 <= share < 1.0:
+        raise ValueError("share must be in [0, 1)")
+    edges = []
+    for i, j, n in contacts:
+        n = np.asarray(n, float)
+        edges += [(i, j, n), (j, i, -n)]
+    teeth = set(applied) | {e[0] for e in edges} | {e[1] for e in edges}
+    zero = np.zeros(3)
+    app = {t: np.asarray(applied.get(t, zero), float) for t in teeth}
+    received = {t: zero.copy() for t in teeth}
+    passed: dict[tuple[int, int], np.ndarray] = {}
+    for _ in range(iterations):
+        total = {t: app[t] + received[t] for t in teeth}
+        new = {t: zero.copy() for t in teeth}
+        passed = {}
+        for i, j, n in edges:
+            c = float(total[i] @ n)
+            if c > 0 and can_pass(i, float(np.linalg.norm(total[i]))):
+                passed[(i, j)] = share * c * n
+                new[j] += passed[(i, j)]
+        delta = max((float(np.abs(new[t] - received[t]).max()) for t in teeth), default=0.0)
+        received = new
+        if delta < tol_cN:
+            break
+    total = {t: app[t] + received[t] for t in teeth}
+    free, blocked_by = {}, {}
+    for t in teeth:
+        f = total[t].copy()
+        pushes = [(j, n) for i, j, n in edges if i == t and float(total[t] @ n) > 0]
+        for _ in range(3):  # project out each blocked direction; repeat for directions that interact
+            for j, n in pushes:
+                c = float(f @ n)
+                if c > 0:
+                    f -= c * n
+        free[t] = f
+        if pushes:
+            blocked_by[t] = [j for j, _ in pushes]
+    return ForceBalance(app, received, total, free, blocked_by, passed)

@@ -1,0 +1,482 @@
+"""The tooth movement simulator: loads move teeth step by step until collisions stop them.
+
+    model = MovementModel.build(case)                 # once: dentition, collision model, mechanics
+    for record in simulate(model, detector="continuous"):
+        ...                                           # one StepRecord per step (step 0 = initial)
+
+Each step (the paper's frame) of `step_days`:
+1. Forces: the case's loads (directions along the arch: toward the next present tooth, the paper's
+   director vector) plus forces passed on by touching teeth (`propagation`): a tooth pushing into
+   a touching tooth is blocked in that direction and passes a share of its push on, down the arch.
+   A blocked tooth whose neighbour gives way follows it (teeth in contact move together).
+2. Motion: each tooth's motion under its free force (`biomechanics`, wire models and rate law);
+   its intended pose at the end of the step. Between the step's ends a tooth moves as
+   `collision.motion.interpolate_pose` says, the motion the continuous detector sweeps.
+3. Collisions: pairs of teeth that may meet (arch neighbours skipping extracted teeth; facing teeth
+   of the other arch only for teeth moving vertically, since occlusal contacts stop vertical
+   movement) are tested with the chosen detector. Continuous: every mover is cut back to its
+   earliest time of first contact (refined on the exact meshes to `contact_tolerance_mm`), so the
+   teeth stop just touching; cutting one tooth may put it in another's way, so detection repeats
+   on the cut motions (a few rounds). Discrete detectors (bounding circles, discrete sphere trees,
+   exact meshes) test the end poses: a tooth found overlapping stops there, so it may have sunk
+   into its neighbour by up to one step's travel, which is the paper's point about them.
+   Each collision's rigid-body impact response is computed and reported (`impact`).
+4. Contacts at the new poses give the touching set of the next step; the exact meshes give the
+   largest interpenetration; the paper's tooth-to-tooth distances are measured.
+
+Model (built once) and state (poses, touching pairs) are kept apart: a step never rebuilds geometry.
+Units: mm, degrees in reports, cN, cN*mm, days.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Iterator, Mapping
+
+import numpy as np
+
+from .. import fdi as F
+from ..case import Case, Load
+from ..collision import CollisionModel, CollisionRequest, candidate_pairs, detect_step, interpolate_pose
+from ..collision import exact
+from ..dentition import Dentition
+from ..errors import CaseError
+from ..metrics import PairDistance, tooth_to_tooth_distances
+from .biomechanics import Motion, RateLaw, ToothMechanics, build_mechanics, tooth_motion
+from .impact import Body, impact
+from .propagation import ForceBalance, propagate
+
+SIM_DETECTORS = ("circles", "discrete", "continuous", "exact")
+
+
+@dataclass(frozen=True)
+class MovementSettings:
+    """Parameters of the movement model (case file table [simulation]).
+
+    force_share: fraction (0..1) of a push passed on to the tooth it hits.
+    restitution: Newton's coefficient (0..1) of the reported impacts.
+    resistance_rule / resistance_fraction: centre of resistance, see `resistance`.
+    contact_tolerance_mm: continuous detector: teeth stop within this travel (mm) of touching.
+    touch_tolerance_mm: exact and continuous detectors: meshes this close (mm) count as touching.
+    rounds: continuous detector: detection rounds on cut motions per step.
+    """
+
+    force_share: float = 0.5
+    restitution: float = 0.5
+    resistance_rule: str = "literature"
+    resistance_fraction: float = 0.4
+    rate: RateLaw = RateLaw()
+    contact_tolerance_mm: float = 0.02
+    touch_tolerance_mm: float = 0.1
+    rounds: int = 4
+
+
+@dataclass(frozen=True, eq=False)
+class CollisionEvent:
+    """Two teeth met in a step: at `time` (fraction of the step; 1.0 for discrete detectors, which
+    only see the end), with the impact response of the paper."""
+
+    pair: tuple[int, int]
+    time: float
+    impact: dict
+
+
+@dataclass(frozen=True, eq=False)
+class StepRecord:
+    """The state after one step (step 0: the initial state, before any movement).
+
+    poses: FDI -> (4, 4) local -> arch frame, mm (extracted teeth keep their rest pose, not drawn).
+    moving: teeth that moved in the step. touching: pairs in contact at the step's end.
+    contact_centers (n, 3) mm / contact_radii (n,) mm: overlapping leaf spheres of touching pairs.
+    collisions: events of the step. forces: the step's force balance (cN).
+    max_penetration_mm: deepest interpenetration of any candidate pair on the exact meshes.
+    distances: the paper's tooth-to-tooth distances (mm) per adjacent pair.
+    """
+
+    step: int
+    time_days: float
+    poses: dict[int, np.ndarray]
+    moving: frozenset[int]
+    touching: tuple[tuple[int, int], ...]
+    contact_centers: np.ndarray
+    contact_radii: np.ndarray
+    collisions: tuple[CollisionEvent, ...]
+    forces: ForceBalance | None
+    max_penetration_mm: float
+    distances: tuple[PairDistance, ...]
+
+    @property
+    def total_distance_mm(self) -> float:
+        return float(sum(d.distance_mm for d in self.distances))
+
+
+@dataclass(eq=False)
+class MovementModel:
+    """What never changes during a run: the case, the dentition, its collision model, each tooth's mechanics."""
+
+    case: Case
+    dentition: Dentition
+    collision: CollisionModel
+    mechanics: dict[int, ToothMechanics]
+    settings: MovementSettings
+    extracted: frozenset[int] = field(default_factory=frozenset)
+    present: tuple[int, ...] = ()
+    pairs: tuple[tuple[int, int], ...] = ()  # broad phase: arch neighbours, then facing pairs
+    facing: frozenset[tuple[int, int]] = field(default_factory=frozenset)
+    total_mass_g: float = 0.0
+
+    @classmethod
+    def build(cls, case: Case, dentition: Dentition | None = None, collision: CollisionModel | None = None,
+              settings: MovementSettings | None = None, tree_builder: Callable | None = None) -> "MovementModel":
+        settings = settings or getattr(case, "simulation", None) or MovementSettings()
+        dentition = dentition or case.build_dentition()
+        if collision is None:
+            collision = CollisionModel.from_dentition(dentition, tree_builder=tree_builder or default_tree_builder())
+        extracted = frozenset(case.extractions)
+        present = tuple(n for n in dentition.fdis if n not in extracted)
+        pairs = candidate_pairs(dentition.fdis, extracted)
+        neighbours = set(dentition.adjacent_pairs(set(extracted)))
+        facing = frozenset(p for p in pairs if tuple(p) not in neighbours)
+        mech = {n: build_mechanics(dentition.teeth[n], settings.resistance_rule, settings.resistance_fraction) for n in present}
+        return cls(case, dentition, collision, mech, settings, extracted, present, tuple(map(tuple, pairs)), facing)
+
+
+def default_tree_builder() -> Callable:
+    """The project's sphere-tree builder (cached when the spheretree package offers it), else the
+    optimising `fit` builder, memoised per mesh for the life of the process."""
+    try:
+        from ..collision.model import default_tree_builder as project_builder
+
+        return project_builder()
+    except Exception:  # the spheretree package has no cached builder yet
+        from ..spheretree.fit import build_fit_tree
+
+        cache: dict[bytes, object] = {}
+
+        def build(mesh):
+            key = mesh.vertices.tobytes() + mesh.faces.tobytes()
+            if key not in cache:
+                cache[key] = build_fit_tree(mesh.vertices, mesh.faces)
+            return cache[key]
+
+        return build
+
+
+# ---------------------------------------------------------------------------------------------
+# loads: directions and points at the current poses
+
+
+def _arch_step(fdi: int, direction: str) -> int:
+    """+1 / -1: which way along `arch_order` (right to left) is `direction` for this tooth."""
+    mesial = 1 if F.quadrant(fdi) in (1, 4) else -1
+    return mesial if direction == "mesial" else -mesial
+
+
+def _horizontal(v: np.ndarray) -> np.ndarray:
+    h = np.array([v[0], 0.0, v[2]])
+    n = np.linalg.norm(h)
+    return h / n if n > 0 else h
+
+
+def arch_direction(model: MovementModel, poses: Mapping[int, np.ndarray], fdi: int, direction: str) -> np.ndarray:
+    """(3,) unit arch-frame vector 'mesial' or 'distal' for a tooth at `poses`: toward the crown centre
+    of the next present tooth that way along the arch (the paper's director vector), or along the
+    tooth's own mesiodistal axis at the end of the arch."""
+    order = [t for t in F.arch_order(F.arch_of(fdi), set(model.dentition.teeth)) if t not in model.extracted]
+    i = order.index(fdi)
+    j = i + _arch_step(fdi, direction)
+    tooth = model.dentition.teeth[fdi]
+    R, p = poses[fdi][:3, :3], poses[fdi][:3, 3]
+    if 0 <= j < len(order):
+        other = model.dentition.teeth[order[j]]
+        c_other = other.to_world(other.crown_center, poses[order[j]])
+        return _horizontal(c_other - tooth.to_world(tooth.crown_center, poses[fdi]))
+    sign = 1.0 if direction == "mesial" else -1.0
+    return _horizontal(sign * (R @ tooth.mesial))
+
+
+def load_vectors(model: MovementModel, poses: Mapping[int, np.ndarray], load: Load, fdi: int):
+    """(force (3,) cN, point (3,) mm, couple (3,) cN*mm) of one load on one tooth, arch frame, at `poses`."""
+    tooth = model.dentition.teeth[fdi]
+    mech = model.mechanics[fdi]
+    R, p = poses[fdi][:3, :3], poses[fdi][:3, 3]
+    d = load.direction
+    if load.movement == "extrusion":
+        d = "occlusal"
+    elif load.movement == "intrusion":
+        d = "apical"
+    if isinstance(d, str):
+        if d in ("mesial", "distal"):
+            u = arch_direction(model, poses, fdi, d)
+        elif d in ("labial", "lingual"):
+            t = arch_direction(model, poses, fdi, "mesial")
+            u = _horizontal(np.cross(t, [0.0, 1.0, 0.0]))
+            if u @ (R @ tooth.labial) < 0:
+                u = -u
+            if d == "lingual":
+                u = -u
+        else:
+            u = R @ tooth.long_axis * (1.0 if d == "occlusal" else -1.0)
+    else:
+        u = np.asarray(d, float) / np.linalg.norm(d)
+    pt = load.point
+    local = {"bracket": mech.bracket, "crown_center": mech.crown_center,
+             "center_of_resistance": mech.center_of_resistance}.get(pt) if isinstance(pt, str) else np.asarray(pt, float)
+    axis = {"mesiodistal": tooth.mesial, "labiolingual": tooth.labial, "long_axis": tooth.long_axis}[load.moment_axis]
+    return load.force_cN * u, R @ local + p, load.moment_cNmm * (R @ axis)
+
+
+# ---------------------------------------------------------------------------------------------
+# one step
+
+
+def _crown_centers(model: MovementModel, poses: Mapping[int, np.ndarray]) -> dict[int, np.ndarray]:
+    return {n: model.dentition.teeth[n].to_world(model.dentition.teeth[n].crown_center, poses[n]) for n in model.present}
+
+
+def _normal(model: MovementModel, pair: tuple[int, int], centers: Mapping[int, np.ndarray]) -> np.ndarray:
+    """Unit vector from pair[0] toward pair[1]: horizontal between crown centres for neighbours,
+    vertical for facing (occlusal) pairs."""
+    a, b = pair
+    if pair in model.facing or (b, a) in model.facing:
+        return np.array([0.0, np.sign(centers[b][1] - centers[a][1]) or 1.0, 0.0])
+    return _horizontal(centers[b] - centers[a])
+
+
+def _motions(model: MovementModel, poses, balance: ForceBalance, loads_on: dict, dt: float, centers) -> dict[int, Motion]:
+    """Each tooth's motion over the step under its free force; blocked teeth follow a neighbour that gives way."""
+    s = model.settings
+    wire = model.case.wire.type
+    motions: dict[int, Motion] = {}
+    for n in model.present:
+        f = balance.free.get(n, np.zeros(3))
+        own = loads_on.get(n, [])
+        couple = sum((c for _, _, c, _ in own), np.zeros(3))
+        if not np.any(f) and not np.any(couple):
+            continue
+        if own and any(np.any(fv) for fv, _, _, _ in own):
+            w = np.array([np.linalg.norm(fv) for fv, _, _, _ in own])
+            point = sum(wi * pt for wi, (_, pt, _, _) in zip(w, own)) / max(w.sum(), 1e-12)
+        else:
+            point = centers[n]
+        translation_only = wire == "rectangular" and (not own or any(bodily for *_, bodily in own))
+        m = tooth_motion(model.mechanics[n], poses[n], f, point, couple, wire, translation_only, s.rate)
+        if not m.is_still:
+            motions[n] = m
+    if wire != "rectangular":
+        return motions
+    # a tooth blocked by a neighbour that moves away follows it, as far as its own push would take it
+    for _ in range(len(model.present)):
+        changed = False
+        for i, blockers in balance.blocked_by.items():
+            for j in blockers:
+                if j not in motions:
+                    continue
+                n_ij = _normal(model, (i, j), centers)
+                p = 0.5 * (centers[i] + centers[j])
+                away = float(motions[j].displacement(p, dt)[0] @ n_ij) / dt
+                mi = motions.get(i, Motion.still(centers[i]))
+                cur = float(mi.displacement(p, dt)[0] @ n_ij) / dt
+                push = float(balance.total[i] @ n_ij)
+                want = float(s.rate.rate(np.linalg.norm(balance.total[i]), model.mechanics[i].root_area_mm2)) * push / max(
+                    np.linalg.norm(balance.total[i]), 1e-12)
+                target = min(away, want)
+                if target > cur + 1e-12:
+                    motions[i] = Motion(mi.pivot, mi.velocity + (target - cur) * n_ij, mi.omega)
+                    changed = True
+        if not changed:
+            break
+    return motions
+
+
+def _approaching(model, pair, motions, dt, centers) -> bool:
+    a, b = pair
+    p = 0.5 * (centers[a] + centers[b])
+    n = _normal(model, pair, centers)
+    da = motions[a].displacement(p, dt)[0] if a in motions else np.zeros(3)
+    db = motions[b].displacement(p, dt)[0] if b in motions else np.zeros(3)
+    return float((da - db) @ n) > 1e-9
+
+
+def _vertical_mover(m: Motion | None, point: np.ndarray, dt: float) -> bool:
+    if m is None:
+        return False
+    d = m.displacement(point, dt)[0]
+    return abs(d[1]) > 0.5 * np.hypot(d[0], d[2])
+
+
+def _touching(model: MovementModel, detector: str, P: dict[int, np.ndarray]):
+    """Pairs in contact at poses P with the detector's notion of contact, and the leaves to draw."""
+    s = model.settings
+    pairs = list(model.pairs)
+    empty = (np.zeros((0, 3)), np.zeros(0))
+    if detector == "circles":
+        res = detect_step(model.collision, P, None, pairs, "circles")
+        return res.touching_pairs(), empty
+    if detector == "exact":
+        return [p for p in pairs if _exact_distance(model, P, p) <= s.touch_tolerance_mm], empty
+    res = detect_step(model.collision, P, None, pairs, "discrete", CollisionRequest(all_leaf_pairs=True))
+    touching = res.touching_pairs()
+    if detector == "continuous":
+        touching = [p for p in touching if _exact_distance(model, P, p) <= s.touch_tolerance_mm]
+    keep = np.isin(res.pair_of_leaf, [i for i, p in enumerate(map(tuple, res.pairs.tolist())) if p in set(touching)])
+    centers = np.concatenate([res.centers_a[keep], res.centers_b[keep]])
+    radii = np.concatenate([res.radii_a[keep], res.radii_b[keep]])
+    return touching, (centers, radii)
+
+
+def _fcl_pair(model: MovementModel, P, pair):
+    ia, ib = model.collision.index[pair[0]], model.collision.index[pair[1]]
+    oa, ob = model.collision.fcl_object(ia), model.collision.fcl_object(ib)
+    exact.set_pose(oa, P[pair[0]])
+    exact.set_pose(ob, P[pair[1]])
+    return oa, ob
+
+
+def _exact_distance(model: MovementModel, P, pair) -> float:
+    return exact.distance(*_fcl_pair(model, P, pair))
+
+
+def max_penetration(model: MovementModel, P: Mapping[int, np.ndarray]) -> float:
+    """mm: the deepest interpenetration of any candidate pair at poses P, on the exact meshes
+    (FCL finds the intersecting pairs, `exact.penetration_depth` measures them)."""
+    worst = 0.0
+    for a, b in model.pairs:
+        hit, _ = exact.collide(*_fcl_pair(model, P, (a, b)))
+        if hit:
+            ta, tb = model.dentition.teeth[a], model.dentition.teeth[b]
+            worst = max(worst, exact.penetration_depth(ta.mesh, P[a], tb.mesh, P[b]))
+    return worst
+
+
+def _impact(model: MovementModel, pair, motions, P_contact, dt, centers, restitution) -> dict:
+    bodies = []
+    for n in pair:
+        mech = model.mechanics[n]
+        T = P_contact[n]
+        com = T[:3, :3] @ mech.center_of_mass + T[:3, 3]
+        inertia = T[:3, :3] @ mech.inertia_g_mm2 @ T[:3, :3].T
+        m = motions.get(n)
+        v = m.displacement(com, dt)[0] / dt if m is not None else np.zeros(3)
+        w = m.omega if m is not None else np.zeros(3)
+        bodies.append(Body(mech.mass_g, com, inertia, v, w))
+    c = _crown_centers_of(model, P_contact, pair)
+    hit = impact(bodies[0], bodies[1], 0.5 * (c[0] + c[1]), _normal(model, pair, dict(zip(pair, c))), restitution)
+    return hit.summary()
+
+
+def _crown_centers_of(model, P, pair):
+    return [model.dentition.teeth[n].to_world(model.dentition.teeth[n].crown_center, P[n]) for n in pair]
+
+
+def simulate(model: MovementModel, detector: str | None = None, steps: int | None = None) -> Iterator[StepRecord]:
+    """Run the case of `model` with `detector` ('circles', 'discrete', 'continuous', 'exact'; the
+    case's by default) for `steps` steps of the case's step_days (the case's count by default).
+    Yields the initial state (step 0), then one StepRecord per step."""
+    detector = detector or model.case.detector
+    if detector not in SIM_DETECTORS:
+        raise CaseError(model.case.path, "treatment.detector", f"unknown detector {detector!r}",
+                        f"use one of: {', '.join(SIM_DETECTORS)}")
+    s = model.settings
+    dt = float(model.case.step_days)
+    n_steps = model.case.steps if steps is None else int(steps)
+    P = {n: np.asarray(T, float).copy() for n, T in model.dentition.rest_poses().items()}
+    touching, leaves = _touching(model, detector, P)
+    dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
+    yield StepRecord(0, 0.0, {n: T.copy() for n, T in P.items()}, frozenset(), tuple(touching), leaves[0], leaves[1],
+                     (), None, max_penetration(model, P), dist)
+    for k in range(1, n_steps + 1):
+        centers = _crown_centers(model, P)
+        # 1. forces
+        loads_on: dict[int, list] = {}
+        for load in model.case.loads:
+            bodily = load.movement in ("translation", "extrusion", "intrusion") or (
+                load.movement == "auto" and load.moment_cNmm == 0.0)
+            for n in load.teeth:
+                if n in model.mechanics:
+                    loads_on.setdefault(n, []).append((*load_vectors(model, P, load, n), bodily))
+        applied = {n: sum((f for f, *_ in v), np.zeros(3)) for n, v in loads_on.items()}
+        contacts = [(a, b, _normal(model, (a, b), centers)) for a, b in touching]
+        balance = propagate(applied, contacts, s.force_share,
+                            lambda n, f: n in model.mechanics and s.rate.moves(f, model.mechanics[n].root_area_mm2))
+        # 2. motions and intended end poses
+        motions = _motions(model, P, balance, loads_on, dt, centers)
+        P1 = dict(P)
+        for n, m in motions.items():
+            P1[n] = m.apply(P[n], dt)
+        # 3. collisions
+        touching_set = set(touching)
+        events: list[CollisionEvent] = []
+
+        def tested(current: dict[int, Motion], skip: set) -> list[tuple[int, int]]:
+            out = []
+            for pair in model.pairs:
+                a, b = pair
+                if pair in skip or (a not in current and b not in current):
+                    continue
+                if pair in model.facing and not (_vertical_mover(current.get(a), centers[a], dt)
+                                                 or _vertical_mover(current.get(b), centers[b], dt)):
+                    continue
+                if pair in touching_set and not _approaching(model, pair, current, dt, centers):
+                    continue
+                out.append(pair)
+            return out
+
+        if detector == "continuous":
+            tcut = {n: 1.0 for n in motions}
+            done: set = set()
+            request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=True,
+                                       contact_tolerance_mm=s.contact_tolerance_mm)
+            for _ in range(s.rounds):
+                current = {n: m for n, m in motions.items() if tcut[n] > 0}
+                pairs = tested(_scaled(current, tcut), done)
+                if not pairs:
+                    break
+                res = detect_step(model.collision, P, P1, pairs, "continuous", request)
+                hits = [(tuple(map(int, pr)), float(t)) for pr, t in zip(res.pairs, res.time_of_first_contact) if not np.isnan(t)]
+                if not hits:
+                    break
+                for pair, t in hits:
+                    done.add(pair)
+                    P_at = dict(P1)
+                    for n in pair:
+                        if n in tcut:
+                            P_at[n] = interpolate_pose(P[n], P1[n], t)
+                    events.append(CollisionEvent(pair, t * _frac(tcut, pair), _impact(model, pair, motions, P_at, dt, centers, s.restitution)))
+                cut: dict[int, float] = {}
+                for pair, t in hits:
+                    for n in pair:
+                        if n in tcut:
+                            cut[n] = min(cut.get(n, 1.0), t)
+                for n, t in cut.items():
+                    P1[n] = interpolate_pose(P[n], P1[n], t)
+                    tcut[n] *= t
+        else:
+            pairs = tested(motions, set())
+            if pairs:
+                res = detect_step(model.collision, P, P1, pairs, detector)
+                for pair in res.touching_pairs():
+                    events.append(CollisionEvent(pair, 1.0, _impact(model, pair, motions, P1, dt, centers, s.restitution)))
+        moved = frozenset(n for n in motions if not np.allclose(P1[n], P[n], atol=1e-12))
+        P = P1
+        # 4. contacts, interpenetration, distances
+        before = touching_set
+        touching, leaves = _touching(model, detector, P)
+        # a moving tooth that made a new contact without a reported hit (it stopped within the
+        # touching tolerance, or a discrete test missed the instant) has collided too
+        seen = {e.pair for e in events}
+        for pair in touching:
+            if pair not in before and pair not in seen and (pair[0] in moved or pair[1] in moved):
+                events.append(CollisionEvent(pair, 1.0, _impact(model, pair, motions, P, dt, centers, s.restitution)))
+        dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
+        yield StepRecord(k, k * dt, {n: T.copy() for n, T in P.items()}, moved, tuple(touching), leaves[0], leaves[1],
+                         tuple(events), balance, max_penetration(model, P), dist)
+
+
+def _scaled(motions: dict[int, Motion], tcut: dict[int, float]) -> dict[int, Motion]:
+    """Motions shortened to the fraction of the step each tooth still makes (for the approach test)."""
+    return {n: Motion(m.pivot, m.velocity * tcut[n], m.omega * tcut[n]) for n, m in motions.items()}
+
+
+def _frac(tcut: dict[int, float], pair) -> float:
+    return min((tcut.get(n, 1.0) for n in pair), default=1.0)
