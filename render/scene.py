@@ -109,11 +109,15 @@ class DentitionScene:
     """A pyrender scene of one dentition, its contact markers, the camera and the light rig."""
 
     def __init__(self, dentition: Dentition, size: tuple[int, int] = (640, 480), *, hide_roots: bool = False,
-                 color_contact_faces: bool = False, marker_style: str = "sprite"):
+                 color_contact_faces: bool = False, marker_style: str = "sprite", marker_subdivisions: int = 1,
+                 frame_points: np.ndarray | None = None):
         """`marker_style`: "sprite" draws each contact sphere as a ray-cast point sprite (cheap at
-        thousands of markers); "mesh" as an instanced 80-triangle icosphere (kept for comparison)."""
+        thousands of markers); "mesh" as an instanced icosphere (80 triangles at the default
+        `marker_subdivisions`). `frame_points` ((n, 3) arch frame, mm) replace the rest-pose
+        vertices as what the camera presets are framed on."""
         pyrender = load_pyrender()
         self.uid = next(_scene_ids)  # names this scene in the renderer's caches
+        self._frame_points = None if frame_points is None else np.asarray(frame_points, float).reshape(-1, 3)
         self.dentition = dentition
         self.size = (int(size[0]), int(size[1]))
         self.hide_roots = hide_roots
@@ -139,7 +143,7 @@ class DentitionScene:
                                               texcoord_0=np.zeros((1, 2), np.float32),
                                               mode=pyrender.GLTF.POINTS, material=self.marker_material)
         elif marker_style == "mesh":
-            pos, nrm, idx = _unit_sphere(1)
+            pos, nrm, idx = _unit_sphere(marker_subdivisions)
             self.markers = pyrender.Primitive(positions=pos, normals=nrm, indices=idx, material=self.marker_material,
                                               poses=np.eye(4, dtype=np.float32)[None])
         else:
@@ -171,8 +175,11 @@ class DentitionScene:
             from .cameras import PRESETS
 
             arches = PRESETS[name][2]
-            pts = [self.dentition.teeth[f].world_mesh().vertices for f in self.dentition.fdis
-                   if arch_of(f) in arches]
+            if self._frame_points is not None:
+                pts = [self._frame_points]
+            else:
+                pts = [self.dentition.teeth[f].world_mesh().vertices for f in self.dentition.fdis
+                       if arch_of(f) in arches]
             self._views[name] = frame_view(name, np.concatenate(pts), self.size)
         return self._views[name]
 
