@@ -235,7 +235,11 @@ def tooth_motion(mech: ToothMechanics, pose: np.ndarray, force_cN: np.ndarray, p
     d = float(np.linalg.norm(B - C)) or 1.0
     m = float(np.linalg.norm(rest))
     tip = rest / m * law.rate(m / d, area) / d if m > 0 else np.zeros(3)
-    return Motion(B, np.cross(spin, B - C), spin + tip)
+    if not np.any(tip):
+        return Motion(C, np.zeros(3), spin)
+    if not np.any(spin):
+        return Motion(B, np.zeros(3), tip)
+    return Motion(B, np.cross(spin, B - C), spin + tip)  # both: first order in the step's angle
 
 
 def _axial_spin(Mc: np.ndarray, axis: np.ndarray, area: float, law: RateLaw) -> np.ndarray:

@@ -1,0 +1,58 @@
+"""Force passed on through contacts: the paper's "part of its force passes to the tooth it hit, and so on"."""
+
+import numpy as np
+import pytest
+
+from orthosim.movement.propagation import propagate
+
+X = np.array([1.0, 0.0, 0.0])
+
+
+def always(_tooth, _force):
+    return True
+
+
+def test_a_chain_of_three_touching_teeth_pushed_from_one_end_passes_the_shares_down_the_chain():
+    # A -> B -> C touching in a row along +x; 200 cN on A toward B; share 0.5
+    bal = propagate({1: 200 * X}, [(1, 2, X), (2, 3, X)], share=0.5, can_pass=always)
+    assert np.allclose(bal.received[2], 100 * X)
+    assert np.allclose(bal.received[3], 50 * X)
+    # A and B push into their neighbours: blocked along the chain; C, free on its far side, moves
+    assert np.allclose(bal.free[1], 0) and np.allclose(bal.free[2], 0)
+    assert np.allclose(bal.free[3], 50 * X)
+    assert set(bal.blocked_by) == {1, 2}
+
+
+@pytest.mark.parametrize("share", [0.0, 0.3, 0.8])
+def test_the_share_is_a_parameter(share):
+    bal = propagate({1: 100 * X}, [(1, 2, X), (2, 3, X)], share=share, can_pass=always)
+    assert np.allclose(bal.received[3], 100 * share**2 * X)
+
+
+def test_only_the_pushing_component_is_passed_on():
+    f = np.array([60.0, 0.0, 80.0])  # 60 cN into the neighbour, 80 cN sideways
+    bal = propagate({1: f}, [(1, 2, X)], share=0.5, can_pass=always)
+    assert np.allclose(bal.received[2], 30 * X)
+    assert np.allclose(bal.free[1], [0.0, 0.0, 80.0])  # still free to move sideways
+
+
+def test_a_tooth_pulled_away_from_its_neighbour_passes_nothing():
+    bal = propagate({2: 100 * X}, [(1, 2, X)], share=0.5, can_pass=always)  # 2 pulled away from 1
+    assert not bal.passed
+    assert np.allclose(bal.free[2], 100 * X)
+
+
+def test_opposite_pushes_meeting_in_a_chain_block_every_tooth():
+    # 1 -> 2 -> 3 <- 4 (like both sides of an arch pushing toward the incisors)
+    contacts = [(1, 2, X), (2, 3, X), (3, 4, X)]
+    bal = propagate({1: 100 * X, 4: -100 * X}, contacts, share=0.5, can_pass=always)
+    for t in (1, 2, 3, 4):
+        assert np.linalg.norm(bal.free[t]) < 1e-6
+
+
+def test_propagation_stops_where_the_force_no_longer_moves_a_tooth():
+    moves = lambda tooth, force: force >= 40.0  # threshold 40 cN
+    bal = propagate({1: 100 * X}, [(1, 2, X), (2, 3, X), (3, 4, X)], share=0.5, can_pass=moves)
+    assert np.allclose(bal.received[2], 50 * X)
+    assert np.allclose(bal.received[3], 25 * X)  # 2 had 50 cN: enough, it passed on
+    assert np.allclose(bal.received[4], 0)  # 3 had 25 cN: below threshold, nothing passed
