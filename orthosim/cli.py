@@ -154,8 +154,17 @@ from .collision.commands import collide  # noqa: E402  (issue 5: orthosim collid
 main.add_command(collide)
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Repairs and other warnings reach the user as `orthosim: warning: ...`, one line each."""
+    text = " ".join(str(message).split())
+    click.echo(f"orthosim: warning: {text}", err=True)
+
+
 def entry() -> None:
     """Console-script entry: run the CLI, turning user errors into one line and an exit code."""
+    import warnings
+
+    warnings.showwarning = _one_line_warning
     try:
         main.main(standalone_mode=False)
     except OrthosimError as err:

@@ -144,3 +144,12 @@ def test_parametric_only_keys_are_refused_for_mesh_models(tmp_path):
 def test_duration_gives_step_count(tmp_path):
     case = load_case(write(tmp_path, BASE.replace("duration_days = 10", "duration_days = 9.5")))
     assert case.steps == math.ceil(9.5 / 1)
+
+
+def test_real_teeth_case_names_the_open_full_jaw_folder():
+    path = CASES / "open_full_jaw_patient26.toml"
+    if not (CASES.parent.parent / "shared" / "data" / "open-full-jaw-patient26").is_dir():
+        pytest.skip("../shared/data is not beside the repository")
+    case = load_case(path)
+    assert case.model.kind == "open-full-jaw"
+    assert case.model.present_teeth() == {18, 17, 16, 15, 14, 13, 12, 11, 21, 22, 23, 24, 25, 26, 27}
