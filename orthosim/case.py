@@ -79,6 +79,16 @@ class Wire:
 
 
 @dataclass(frozen=True)
+class Simulation:
+    """Movement-model parameters ([simulation] table; see orthosim.movement)."""
+
+    force_share: float = 0.5  # fraction (0..1) of a push passed on to the tooth it hits
+    restitution: float = 0.5  # Newton's coefficient (0..1) of the reported impacts
+    resistance_rule: str = "literature"  # centre of resistance: "literature" or "paper"
+    resistance_fraction: float = 0.4  # literature rule: share (1/3..1/2) of the embedded root below the crest
+
+
+@dataclass(frozen=True)
 class Case:
     path: Path
     name: str
@@ -90,6 +100,7 @@ class Case:
     duration_days: float
     step_days: float
     detector: str
+    simulation: Simulation = Simulation()
 
     @property
     def steps(self) -> int:
@@ -185,11 +196,13 @@ def _ranges(teeth: set[int]) -> str:
     return ", ".join(str(t) for t in sorted(teeth))
 
 
-_TOP = ("case", "model", "treatment", "wire", "loads")
+_TOP = ("case", "model", "treatment", "wire", "loads", "simulation")
 _CASE = ("name", "description")
 _MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files", "scale")
 _TREATMENT = ("extractions", "duration_days", "step_days", "detector")
 _WIRE = ("type",)
+_SIMULATION = ("force_share", "restitution", "resistance_rule", "resistance_fraction")
+RESISTANCE_RULES = ("literature", "paper")
 _LOAD = ("teeth", "force_cN", "direction", "point", "moment_cNmm", "moment_axis", "movement")
 
 
@@ -241,7 +254,22 @@ def load_case(path: str | Path) -> Case:
     if not isinstance(raw_loads, list):
         top.fail("loads", "must be an array of tables", "write each load as [[loads]]")
     loads = tuple(_read_load(path, i, raw, present, set(extractions), wire) for i, raw in enumerate(raw_loads))
-    return Case(path, name, description, model, tuple(extractions), loads, wire, duration, step, detector)
+    simulation = _read_simulation(_Reader(path, "simulation", top.get("simulation", {}), _SIMULATION))
+    return Case(path, name, description, model, tuple(extractions), loads, wire, duration, step, detector, simulation)
+
+
+def _read_simulation(r: _Reader) -> Simulation:
+    share = r.number("force_share", 0.5)
+    if share >= 1.0:
+        r.fail("force_share", f"must be below 1, got {share:g}", "use a fraction such as 0.5 (a tooth keeps part of its push)")
+    restitution = r.number("restitution", 0.5)
+    if restitution > 1.0:
+        r.fail("restitution", f"must be at most 1, got {restitution:g}", "use a value from 0 (no bounce) to 1 (elastic)")
+    rule = r.string("resistance_rule", "literature", RESISTANCE_RULES)
+    fraction = r.number("resistance_fraction", 0.4)
+    if not (1.0 / 3.0 - 1e-9 <= fraction <= 0.5 + 1e-9):
+        r.fail("resistance_fraction", f"{fraction:g} is outside 1/3 to 1/2", "use a value between 0.333 and 0.5")
+    return Simulation(share, restitution, rule, fraction)
 
 
 def _read_model(path: Path, r: _Reader) -> ModelSpec:

@@ -153,3 +153,40 @@ def test_real_teeth_case_names_the_open_full_jaw_folder():
     case = load_case(path)
     assert case.model.kind == "open-full-jaw"
     assert case.model.present_teeth() == {18, 17, 16, 15, 14, 13, 12, 11, 21, 22, 23, 24, 25, 26, 27}
+
+
+# --- [simulation] table (movement parameters) ---------------------------------------------------
+
+def _sim_case(tmp_path, table: str):
+    p = tmp_path / "sim.toml"
+    p.write_text("[model]\nkind = \"parametric\"\nresolution = \"coarse\"\n" + table)
+    return p
+
+
+def test_simulation_parameters_default_to_the_documented_values(tmp_path):
+    from orthosim.case import load_case
+
+    sim = load_case(_sim_case(tmp_path, "")).simulation
+    assert (sim.force_share, sim.restitution, sim.resistance_rule, sim.resistance_fraction) == (0.5, 0.5, "literature", 0.4)
+
+
+def test_simulation_parameters_are_read(tmp_path):
+    from orthosim.case import load_case
+
+    sim = load_case(_sim_case(tmp_path, "[simulation]\nforce_share = 0.3\nrestitution = 1.0\n"
+                                        "resistance_rule = \"paper\"\nresistance_fraction = 0.5\n")).simulation
+    assert (sim.force_share, sim.restitution, sim.resistance_rule, sim.resistance_fraction) == (0.3, 1.0, "paper", 0.5)
+
+
+@pytest.mark.parametrize("line, field", [
+    ("force_share = 1.2", "simulation.force_share"),
+    ("restitution = 1.5", "simulation.restitution"),
+    ("resistance_rule = \"middle\"", "simulation.resistance_rule"),
+    ("resistance_fraction = 0.8", "simulation.resistance_fraction"),
+])
+def test_bad_simulation_parameters_are_refused_naming_the_field(tmp_path, line, field):
+    from orthosim.case import load_case
+    from orthosim.errors import CaseError
+
+    with pytest.raises(CaseError, match=field.replace(".", r"\.")):
+        load_case(_sim_case(tmp_path, f"[simulation]\n{line}\n"))

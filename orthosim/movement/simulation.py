@@ -70,6 +70,14 @@ class MovementSettings:
     touch_tolerance_mm: float = 0.1
     rounds: int = 4
 
+    @classmethod
+    def from_case(cls, case: Case) -> "MovementSettings":
+        sim = getattr(case, "simulation", None)
+        if sim is None:
+            return cls()
+        return cls(force_share=sim.force_share, restitution=sim.restitution,
+                   resistance_rule=sim.resistance_rule, resistance_fraction=sim.resistance_fraction)
+
 
 @dataclass(frozen=True, eq=False)
 class CollisionEvent:
@@ -128,7 +136,7 @@ class MovementModel:
     @classmethod
     def build(cls, case: Case, dentition: Dentition | None = None, collision: CollisionModel | None = None,
               settings: MovementSettings | None = None, tree_builder: Callable | None = None) -> "MovementModel":
-        settings = settings or getattr(case, "simulation", None) or MovementSettings()
+        settings = settings or MovementSettings.from_case(case)
         dentition = dentition or case.build_dentition()
         if collision is None:
             collision = CollisionModel.from_dentition(dentition, tree_builder=tree_builder or default_tree_builder())
