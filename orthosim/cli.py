@@ -83,7 +83,7 @@ def check(cases: tuple[Path, ...]) -> None:
 
 @main.command()
 @click.option("--case", "case", type=click.Path(path_type=Path), default=None,
-              help="Case whose model to use (default: the parametric normal-occlusion model).")
+              help="Case to measure (default: cases/case3_incisor_space_closure.toml, 28 teeth with loads).")
 @click.option("--out", "out_file", type=click.Path(path_type=Path), required=True, help="Where to write the JSON record.")
 @click.option("--size", default="640x480", show_default=True, callback=_size, help="Image size WIDTHxHEIGHT.")
 @click.option("--frames", default=300, show_default=True, type=click.IntRange(1), help="Measured frames per figure (after warm-up).")
@@ -92,15 +92,16 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--memory-frames", default=2000, show_default=True, type=click.IntRange(0),
               help="Length of the run whose memory is recorded.")
 @click.option("--no-png", is_flag=True, help="End to end without writing PNG frames (MP4 only).")
+@click.option("--no-simulate", is_flag=True, help="Skip the movement simulation (end to end on synthetic motion).")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
-          no_png: bool) -> None:
-    """Measure throughput (render alone, end to end) against the 40 fps target; write JSON."""
+          no_png: bool, no_simulate: bool) -> None:
+    """Measure throughput (simulation, render alone, end to end) against the 40 fps target; write JSON."""
     from render.bench import run_bench
 
     from .atomic import write_json
 
     record = run_bench(case, frames=frames, warmup=warmup, size=size, n_markers=markers,
-                       memory_frames=memory_frames, png=not no_png)
+                       memory_frames=memory_frames, png=not no_png, simulate=not no_simulate)
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())

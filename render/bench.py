@@ -3,9 +3,9 @@
 What is measured (median over per-frame wall times after a warm-up, so a stray slow frame on a
 shared machine does not move the figure; fps = 1 / median frame time):
   - render: draw plus colour read-back of one 640x480 frame, the scene already updated;
-  - end_to_end: produce the state (the simulation step when one is plugged in, else the
-    synthetic movement below), detect contacts (when a detector is plugged in), update the scene,
-    render, read back, and encode (MP4 always, PNG frames unless disabled) on the background
+  - simulation: one step of the case's movement, contact detection included, alone;
+  - end_to_end: simulate one step (contacts detected with the continuous detector), update the
+    scene, render, read back, and encode (MP4 always, PNG frames unless disabled) on the background
     encoders of `render.animation.FrameSink`, whose bounded queues make the loop wait for them;
   - render_variants: the same render with each optimisation switched off in turn, measured
     round-robin in the same run so that the ratios stand even when the absolute figures wander
@@ -14,8 +14,9 @@ shared machine does not move the figure; fps = 1 / median frame time):
     leaked GL programs or buffers would show there.
 Components that do not exist yet are reported as null with a "pending" note, never estimated.
 
-The measurement is built on callables so that later issues can plug in the real parts:
-`step(i) -> FrameState` (the simulation) and `detect(state) -> FrameState` (contacts added).
+With a case, the simulation figures run the case through `orthosim.movement` (its step loop runs
+the continuous detector and reports the overlapping leaf spheres, which become the markers), and
+`collision_us_per_step` comes from `orthosim.collision.bench.collision_timings` on the same model.
 """
 
 from __future__ import annotations
@@ -25,8 +26,6 @@ import platform
 import statistics
 import time
 from pathlib import Path
-from typing import Callable
-
 import numpy as np
 
 from .frame_state import FrameState
@@ -59,18 +58,19 @@ class SyntheticMotion:
     """
 
     def __init__(self, dentition, n_markers: int = 2000, moving: tuple[int, ...] | None = None,
-                 amplitude: float = 2.0, period: int = 120, seed: int = 0):
+                 amplitude: float = 2.0, period: int = 120, seed: int = 0, extracted=frozenset()):
         self.dentition = dentition
-        fdis = dentition.fdis
+        self.extracted = frozenset(extracted)
+        fdis = [f for f in dentition.fdis if f not in self.extracted]
         if moving is None:
-            moving = tuple(f for f in (13, 23, 33, 43) if f in dentition.teeth) or tuple(fdis[:2])
+            moving = tuple(f for f in (13, 23, 33, 43) if f in fdis) or tuple(fdis[:2])
         self.moving = frozenset(moving)
         self.rest = dentition.rest_poses()
         self.amplitude, self.period = amplitude, period
         self.n_markers = n_markers
         self.rng = np.random.default_rng(seed)
         # marker pool: crown vertices of the moving teeth and their arch neighbours, local frames
-        pairs = dentition.adjacent_pairs()
+        pairs = dentition.adjacent_pairs(set(self.extracted))
         involved = sorted({f for p in pairs for f in p if self.moving & set(p)} | set(self.moving))
         self.pool_tooth, self.pool_local = [], []
         for f in involved:
@@ -99,8 +99,8 @@ class SyntheticMotion:
             T = poses[int(f)]
             centers[sel] = self.pool_local[idx[sel]] @ T[:3, :3].T + T[:3, 3]
         radii = self.rng.uniform(0.15, 0.35, n)
-        return FrameState(poses=poses, moving=self.moving, contact_centers=centers, contact_radii=radii,
-                          contact_pairs=self.pairs, step=i)
+        return FrameState(poses=poses, extracted=self.extracted, moving=self.moving, contact_centers=centers,
+                          contact_radii=radii, contact_pairs=self.pairs, step=i)
 
 
 def _median_fps(times: list[float]) -> float:
@@ -153,11 +153,30 @@ def _render_variants(dentition, states, size, frames_per_round: int, rounds: int
     }
 
 
-def run_bench(case: str | Path | None = None, *, dentition=None, frames: int = 300, warmup: int = 30, size=(640, 480),
-              n_markers: int = 2000, memory_frames: int = 2000, variant_rounds: int = 4,
-              step: Callable[[int], FrameState] | None = None, detect: Callable[[FrameState], FrameState] | None = None,
-              work_dir: str | Path | None = None, png: bool = True, progress: bool = False) -> dict:
-    """Measure and return the bench record (see the module docstring and the output contract)."""
+DEFAULT_CASE = Path(__file__).resolve().parent.parent / "cases" / "case3_incisor_space_closure.toml"
+
+
+def _simulation(case_obj, dentition, detector: str):
+    """(MovementModel, simulate) when the movement code is present, else (None, reason)."""
+    try:
+        from orthosim.movement.simulation import MovementModel, simulate
+    except ImportError as exc:
+        return None, f"orthosim.movement is not available ({exc})"
+    return (MovementModel.build(case_obj, dentition=dentition), simulate), None
+
+
+def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool = True, detector: str = "continuous",
+              frames: int = 300, warmup: int = 30, size=(640, 480), n_markers: int = 2000, memory_frames: int = 2000,
+              variant_rounds: int = 4, collision_repeats: int = 20, work_dir: str | Path | None = None,
+              png: bool = True) -> dict:
+    """Measure and return the bench record (see the module docstring and the output contract).
+
+    The model is `dentition` when given (then nothing is simulated), else the case's (default:
+    cases/case3_incisor_space_closure.toml, 28 teeth with loads). With `simulate`, the case runs
+    through `orthosim.movement` with `detector` for the simulation and end-to-end figures; the
+    render-alone figures always use `SyntheticMotion` with `n_markers` markers, the worst case the
+    issue sets (a real step reports fewer contacts).
+    """
     import tempfile
 
     from .animation import FrameSink
@@ -166,29 +185,30 @@ def run_bench(case: str | Path | None = None, *, dentition=None, frames: int = 3
 
     t_start = time.perf_counter()
     load_start = os.getloadavg()
+    case_obj = None
+    extracted: frozenset[int] = frozenset()
     if dentition is not None:
-        model = dentition.description or "given dentition"
-    elif case is not None:
+        model_name = dentition.description or "given dentition"
+    else:
         from orthosim.case import load_case
 
-        dentition = load_case(case).build_dentition()
-        model = f"case {case}"
-    else:
-        from .standin import default_dentition
-
-        dentition, model = default_dentition()
-    n_tri = {f: len(t.mesh.faces) for f, t in dentition.teeth.items()}
-    synthetic = SyntheticMotion(dentition, n_markers=n_markers)
-    source = step or synthetic
+        case_path = Path(case) if case is not None else DEFAULT_CASE
+        case_obj = load_case(case_path)
+        dentition = case_obj.build_dentition()
+        extracted = frozenset(case_obj.extractions)
+        model_name = f"{case_obj.name} ({case_path.name})"
+    drawn = [f for f in dentition.fdis if f not in extracted]
+    n_tri = {f: len(dentition.teeth[f].mesh.faces) for f in drawn}
+    synthetic = SyntheticMotion(dentition, n_markers=n_markers, extracted=extracted)
     n_states = warmup + frames
-    states = [synthetic(i) for i in range(n_states)]  # for render-alone: same states every variant
+    states = [synthetic(i) for i in range(n_states)]  # render alone: the same states for every variant
 
     mem_start = rss_mb()
     renderer = Renderer(size)
     scene = DentitionScene(dentition, size)
     gl_renderer, gl_version = renderer.gl_renderer, renderer.gl_version
 
-    # ---- render alone: draw + read back, state updated outside the timed region
+    # ---- render alone: draw + read back, the scene updated outside the timed region
     render_times = []
     for i, st in enumerate(states):
         scene.update(st)
@@ -197,29 +217,71 @@ def run_bench(case: str | Path | None = None, *, dentition=None, frames: int = 3
         if i >= warmup:
             render_times.append(time.perf_counter() - t0)
 
-    # ---- end to end: state -> (detect) -> update -> render -> read back -> encode
-    e2e_times = []
-    tmp_ctx = tempfile.TemporaryDirectory(prefix="orthosim-bench-") if work_dir is None else None
-    out_dir = Path(work_dir) if work_dir is not None else Path(tmp_ctx.name)
-    sink = FrameSink(out_dir, png=png, mp4=True)
-    t_loop = time.perf_counter()
-    for i in range(n_states):
-        t0 = time.perf_counter()
-        st = source(i)
-        if detect is not None:
-            st = detect(st)
-        scene.update(st)
-        image = renderer.render(scene, "frontal")
-        sink.add(image)
-        if i >= warmup:
-            e2e_times.append(time.perf_counter() - t0)
-        if i == warmup - 1:
-            t_loop = time.perf_counter()
-    sink.close()
-    e2e_overall = frames / (time.perf_counter() - t_loop)  # includes draining the encoders
-    mp4_bytes = (out_dir / "animation.mp4").stat().st_size if (out_dir / "animation.mp4").exists() else 0
-    if tmp_ctx is not None:
-        tmp_ctx.cleanup()
+    def end_to_end(next_state) -> dict:
+        """Per-frame wall time of: next_state() -> scene update -> render -> read back -> encode."""
+        times, markers = [], []
+        tmp_ctx = tempfile.TemporaryDirectory(prefix="orthosim-bench-") if work_dir is None else None
+        out_dir = Path(work_dir) if work_dir is not None else Path(tmp_ctx.name)
+        sink = FrameSink(out_dir, png=png, mp4=True)
+        t_loop = time.perf_counter()
+        for i in range(n_states):
+            t0 = time.perf_counter()
+            st = next_state(i)
+            scene.update(st)
+            sink.add(renderer.render(scene, "frontal"))
+            if i >= warmup:
+                times.append(time.perf_counter() - t0)
+                markers.append(st.n_contacts)
+            if i == warmup - 1:
+                t_loop = time.perf_counter()
+        sink.close()
+        overall = frames / (time.perf_counter() - t_loop)  # includes draining the encoders
+        mp4 = out_dir / "animation.mp4"
+        mp4_bytes = mp4.stat().st_size if mp4.exists() else 0
+        if tmp_ctx is not None:
+            tmp_ctx.cleanup()
+        return {"fps": _median_fps(times), "fps_overall_including_encoder_drain": overall, "mp4_bytes": mp4_bytes,
+                "markers_per_frame": {"median": float(np.median(markers)), "max": int(max(markers))}}
+
+    encode = ["MP4 encode (libx264 ultrafast)"] + (["PNG frames (render.png)"] if png else [])
+    e2e_synthetic = end_to_end(synthetic)
+    e2e_synthetic["includes"] = ["synthetic state (SyntheticMotion)", "scene update", "draw", "colour read-back", *encode]
+
+    # ---- the real thing: movement + continuous detection per step
+    pending: dict[str, str] = {}
+    fps_sim = None
+    e2e_sim = None
+    collision = None
+    if case_obj is not None and simulate:
+        sim, why = _simulation(case_obj, dentition, detector)
+        if sim is None:
+            pending["simulation"] = why
+        else:
+            movement_model, run = sim
+            gen = run(movement_model, detector, steps=n_states)
+            sim_times = []
+            for i in range(n_states):
+                t0 = time.perf_counter()
+                next(gen)
+                if i >= warmup:
+                    sim_times.append(time.perf_counter() - t0)
+            gen.close()
+            fps_sim = _median_fps(sim_times)
+            gen = run(movement_model, detector, steps=n_states)
+            e2e_sim = end_to_end(lambda i: FrameState.from_step(next(gen), extracted))
+            gen.close()
+            e2e_sim["includes"] = [f"simulation step (orthosim.movement, {detector} detector)", "scene update", "draw",
+                                   "colour read-back", *encode]
+            try:
+                from orthosim.collision.bench import collision_timings
+
+                collision = collision_timings(dentition, model=movement_model.collision, repeats=collision_repeats)
+            except ImportError as exc:
+                pending["collision"] = f"orthosim.collision.bench is not available ({exc})"
+    elif case_obj is None:
+        pending["simulation"] = "no case given (a bare dentition): end_to_end uses SyntheticMotion"
+    else:
+        pending["simulation"] = "switched off (--no-simulate): end_to_end uses SyntheticMotion"
 
     # ---- memory over a long run (same renderer and scene: what a real run does)
     mem_before_long = rss_mb()
@@ -235,9 +297,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, frames: int = 3
                                 rounds=variant_rounds)
 
     fps_render = _median_fps(render_times)
-    fps_e2e = _median_fps(e2e_times)
-    pending_sim = None if step is not None else "issue 6 (tooth movement) not merged: end_to_end uses SyntheticMotion"
-    pending_det = None if detect is not None else "issue 5 (collision detection) not merged: no detector in end_to_end"
+    e2e = e2e_sim if e2e_sim is not None else e2e_synthetic
     record = {
         "machine": {
             "cores": os.cpu_count(),
@@ -249,43 +309,27 @@ def run_bench(case: str | Path | None = None, *, dentition=None, frames: int = 3
         },
         "target_fps": TARGET_FPS,
         "end_to_end_target_fps": E2E_TARGET_FPS,
-        "model": {"source": model, "teeth": len(n_tri), "triangles_total": int(sum(n_tri.values())),
+        "model": {"source": model_name, "teeth_drawn": len(n_tri), "triangles_total": int(sum(n_tri.values())),
                   "triangles_min_per_tooth": int(min(n_tri.values()))},
         "size": list(size),
-        "contact_markers": n_markers,
+        "contact_markers_render": n_markers,
         "frames": frames,
         "warmup": warmup,
-        "fps": {
-            "simulation": None,
-            "render": fps_render,
-            "end_to_end": fps_e2e,
-        },
+        "fps": {"simulation": fps_sim, "render": fps_render, "end_to_end": e2e["fps"]},
         "meets_target": {
+            "simulation": None if fps_sim is None else fps_sim >= TARGET_FPS,
             "render": fps_render >= TARGET_FPS,
-            "end_to_end": fps_e2e >= TARGET_FPS,
-            "end_to_end_60": fps_e2e >= E2E_TARGET_FPS,
+            "end_to_end": e2e["fps"] >= TARGET_FPS,
+            "end_to_end_60": e2e["fps"] >= E2E_TARGET_FPS,
         },
-        "end_to_end": {
-            "includes": ["synthetic state" if step is None else "simulation step"]
-                        + (["collision detection"] if detect is not None else [])
-                        + ["scene update", "draw", "colour read-back", "MP4 encode (libx264 ultrafast)"]
-                        + (["PNG frames (zlib level 1)"] if png else []),
-            "fps_overall_including_encoder_drain": e2e_overall,
-            "mp4_bytes": mp4_bytes,
-        },
-        "collision_us_per_step": None,
-        "pending": {k: v for k, v in {"simulation": pending_sim, "collision": pending_det}.items() if v},
+        "end_to_end": e2e,
+        "end_to_end_synthetic": e2e_synthetic,
+        "collision_us_per_step": None if collision is None else collision.get("collision_us_per_step"),
+        "collision": collision,
+        "pending": pending,
         "render_variants": variants,
         "memory_mb": {"start": mem_start, "before_long_run": mem_before_long, "end": mem_end,
                       "long_run_frames": memory_frames, "long_run_fps": long_fps},
         "wall_s": time.perf_counter() - t_start,
     }
-    if step is not None:
-        sim_times = []
-        for i in range(n_states):
-            t0 = time.perf_counter()
-            step(i)
-            if i >= warmup:
-                sim_times.append(time.perf_counter() - t0)
-        record["fps"]["simulation"] = _median_fps(sim_times)
     return record

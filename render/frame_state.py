@@ -43,6 +43,14 @@ class FrameState:
         return len(self.contact_radii)
 
     @classmethod
+    def from_step(cls, record, extracted=frozenset()) -> "FrameState":
+        """The frame of one simulation step (`orthosim.movement.simulation.StepRecord` or anything
+        with its fields: step, poses, moving, touching, contact_centers, contact_radii)."""
+        return cls(poses=record.poses, extracted=frozenset(extracted), moving=frozenset(record.moving),
+                   contact_centers=record.contact_centers, contact_radii=record.contact_radii,
+                   contact_pairs=tuple(tuple(p) for p in record.touching), step=int(record.step))
+
+    @classmethod
     def rest(cls, dentition, **kwargs) -> "FrameState":
         """Every tooth of `dentition` at its rest pose, nothing moving, no contacts."""
         return cls(poses=dentition.rest_poses(), **kwargs)
