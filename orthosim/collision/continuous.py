@@ -108,7 +108,7 @@ def _sweep(model, pair_idx, chords, first_only, track_pair=False):
 
 
 def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, T0b, T1b, t_start: float,
-                           tolerance: float = 0.05, max_iterations: int = 200) -> float | None:
+                           tolerance: float = 0.05, max_iterations: int = 2000) -> float | None:
     """Advance a conservative first time of contact on the exact meshes of bodies i_a, i_b.
 
     Returns a time in [t_start, 1) no later than the meshes' first contact (up to FCL's own
