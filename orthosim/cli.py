@@ -46,6 +46,8 @@ def render_options(f):
     f = click.option("--gif", is_flag=True, help="Also write animation.gif.")(f)
     f = click.option("--alpha", is_flag=True, help="PNG frames with a transparent background.")(f)
     f = click.option("--hide-roots", is_flag=True, help="Draw crowns only.")(f)
+    f = click.option("--contact-faces", is_flag=True,
+                     help="Also colour the tooth surface inside each contact sphere (as in the paper's Figure 7).")(f)
     return f
 
 
@@ -147,7 +149,8 @@ def _render_initial(dent, poses, extracted, out_dir: Path, opts: dict) -> dict:
     frames = [FrameState(poses=poses, extracted=frozenset(extracted))]
     return render_run(dent, frames, out_dir, views=opts.get("views") or ("frontal",), size=opts["size"],
                       gif=opts.get("gif", False), alpha=opts.get("alpha", False),
-                      hide_roots=opts.get("hide_roots", False))
+                      hide_roots=opts.get("hide_roots", False),
+                      color_contact_faces=opts.get("contact_faces", False))
 
 
 from .collision.commands import collide  # noqa: E402  (issue 5: orthosim collide validate|bench|step)

@@ -109,11 +109,12 @@ class DentitionScene:
     """A pyrender scene of one dentition, its contact markers, the camera and the light rig."""
 
     def __init__(self, dentition: Dentition, size: tuple[int, int] = (640, 480), *, hide_roots: bool = False,
-                 color_contact_faces: bool = False, marker_style: str = "sprite", marker_subdivisions: int = 1,
-                 frame_points: np.ndarray | None = None):
+                 color_contact_faces: bool = False, show_markers: bool = True, marker_style: str = "sprite",
+                 marker_subdivisions: int = 1, frame_points: np.ndarray | None = None):
         """`marker_style`: "sprite" draws each contact sphere as a ray-cast point sprite (cheap at
         thousands of markers); "mesh" as an instanced icosphere (80 triangles at the default
-        `marker_subdivisions`). `frame_points` ((n, 3) arch frame, mm) replace the rest-pose
+        `marker_subdivisions`). `show_markers=False` with `color_contact_faces=True` shows contacts
+        as coloured tooth surface only. `frame_points` ((n, 3) arch frame, mm) replace the rest-pose
         vertices as what the camera presets are framed on."""
         pyrender = load_pyrender()
         self.uid = next(_scene_ids)  # names this scene in the renderer's caches
@@ -122,6 +123,7 @@ class DentitionScene:
         self.size = (int(size[0]), int(size[1]))
         self.hide_roots = hide_roots
         self.color_contact_faces = color_contact_faces
+        self.show_markers = show_markers
         self.scene = pyrender.Scene(bg_color=[*BACKGROUND, 0.0], ambient_light=AMBIENT)
         # primitive -> version; the renderer re-uploads a primitive whose version it has not seen
         self.buffer_versions: dict[object, int] = {}
@@ -225,7 +227,7 @@ class DentitionScene:
             self._paint_contact_faces(state)
 
     def _update_markers(self, centers: np.ndarray, radii: np.ndarray) -> None:
-        n = len(radii)
+        n = len(radii) if self.show_markers else 0
         self.marker_mesh.is_visible = n > 0
         if n == 0:
             return

@@ -234,3 +234,14 @@ def test_static_image_cache_changes_speed_not_pixels(dentition):
             a_scene.update(moved)
             b_scene.update(moved)
             assert np.array_equal(cached.render(a_scene, "frontal"), plain.render(b_scene, "frontal"))
+
+
+def test_contact_faces_are_drawn_in_the_contact_colour(renderer, dentition):
+    """The Figure 7 option: tooth surface inside a contact sphere coloured, no marker drawn."""
+    c = labial_point(dentition, 11, 3.0)
+    state = FrameState.rest(dentition, contact_centers=c[None], contact_radii=np.array([1.2]), contact_pairs=((11, 21),))
+    painted, view = render(renderer, dentition, "frontal", state, color_contact_faces=True, show_markers=False)
+    hidden, _ = render(renderer, dentition, "frontal", state, show_markers=False)
+    px, rc = pixel_at(painted, view, c)
+    assert is_contact_colour(px)
+    assert not is_contact_colour(hidden[rc])
