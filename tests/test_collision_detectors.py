@@ -222,3 +222,16 @@ def test_asking_for_an_unknown_detector_or_tooth_names_the_fix(parametric):
         detect_step(model, d.rest_poses(), detector="octree")
     with pytest.raises(CollisionError, match="tooth 18"):
         detect_step(model, d.rest_poses(), pairs=[(17, 18)])
+
+
+def test_asking_for_the_first_contact_only_never_delays_the_time_of_first_contact(parametric):
+    from orthosim.collision.bench import perturbed_poses
+
+    d, model = parametric
+    start = {n: T for n, T in perturbed_poses(d.rest_poses(), step_mm=1.0, seed=7).items()}
+    end = perturbed_poses(d.rest_poses(), step_mm=1.0, seed=8)
+    full = detect_step(model, start, end, detector="continuous")
+    first = detect_step(model, start, end, detector="continuous", request=CollisionRequest(all_leaf_pairs=False))
+    assert full.touching.any()
+    assert np.array_equal(full.touching, first.touching)
+    assert np.allclose(np.nan_to_num(full.time_of_first_contact, nan=2), np.nan_to_num(first.time_of_first_contact, nan=2))

@@ -63,8 +63,8 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
         ok = ~np.isnan(enter)
         return ok, {"t": enter, "leave": leave}
 
-    pair, la, lb, payload = descend(model, pair_idx, may_touch, at_leaves, first_only)
-    return pair, la, lb, payload.get("t", np.zeros(0)), payload.get("leave", np.zeros(0))
+    pair, la, lb, payload = descend(model, pair_idx, may_touch, at_leaves)
+    return _earliest(pair, la, lb, payload.get("t", np.zeros(0)), payload.get("leave", np.zeros(0)), first_only)
 
 
 def swept_leaves_posed(model: CollisionModel, pair_idx: np.ndarray, Ta0, Ta1, Tb0, Tb1, first_only: bool = False):
@@ -101,10 +101,18 @@ def _sweep(model, pair_idx, chords, first_only, track_pair=False):
         ok = ~np.isnan(enter)
         return ok, {"t": enter, "leave": leave}
 
-    pair, la, lb, payload = descend(model, pair_idx, may_touch, at_leaves, first_only, track_pair)
-    t = payload.get("t", np.zeros(0))
-    leave = payload.get("leave", np.zeros(0))
-    return pair, la, lb, t, leave
+    pair, la, lb, payload = descend(model, pair_idx, may_touch, at_leaves, track_pair=track_pair)
+    return _earliest(pair, la, lb, payload.get("t", np.zeros(0)), payload.get("leave", np.zeros(0)), first_only)
+
+
+def _earliest(pair, la, lb, t, leave, first_only):
+    """With first_only, the leaf pair of least time of each tooth pair. The descent itself must not
+    stop at a pair's first leaf pair here: a later-found leaf pair may touch earlier."""
+    if not first_only or len(pair) == 0:
+        return pair, la, lb, t, leave
+    order = np.lexsort((t, pair))
+    first = order[np.unique(pair[order], return_index=True)[1]]
+    return pair[first], la[first], lb[first], t[first], leave[first]
 
 
 def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, T0b, T1b, t_start: float,

@@ -164,14 +164,15 @@ class CollisionModel:
 
 
 def default_tree_builder() -> Callable[[trimesh.Trimesh], SphereTree]:
+    """The project's cached sphere-tree builder (`orthosim.spheretree`, method "fit", 8 x 4 levels)."""
     try:
         from ..spheretree import cached_sphere_tree
     except ImportError:
         try:
-            from ..spheretree import build_sphere_tree as cached_sphere_tree
+            from ..spheretree.cache import cached_sphere_tree
         except ImportError:
             raise CollisionError(
-                None, "tree_builder", "orthosim.spheretree has no builder yet", "pass tree_builder= or trees="
+                None, "tree_builder", "orthosim.spheretree has no builder", "pass tree_builder= or trees="
             ) from None
     return lambda mesh: cached_sphere_tree(mesh)
 
