@@ -1,20 +1,27 @@
 """The renderer: owns the offscreen OSMesa OpenGL context and turns a `DentitionScene` into pixels.
 
-Drawing goes through pyrender's `Renderer` with three changes, each measured by `orthosim bench`
-(see render/bench.py):
-  - our Lambert shaders (render/shaders/) instead of pyrender's physically based ones;
-  - no depth read-back: pyrender always reads and linearises the depth buffer, which we never use;
-  - the image is taken straight from OSMesa's client-side colour buffer after `glFinish`, instead
-    of a `glReadPixels` copy into a new bytes object (the frame lives there already).
-Anti-aliasing (4x multisampling through pyrender's framebuffer path) is optional: it costs a blit
-and a `glReadPixels` per frame.
+Drawing goes through a subclass of pyrender's `Renderer` (pyrender still owns meshes, buffers and
+the shader cache); each change below is measured by `orthosim bench` (render/bench.py,
+`render_variants`):
+  - our shaders (render/shaders/) instead of pyrender's physically based ones, with lighting
+    evaluated per vertex;
+  - a lean forward pass that binds the program, camera and lights once per frame, not once per
+    primitive, with cached uniform locations;
+  - contact markers as point sprites, one draw call for thousands;
+  - teeth that did not move drawn once into a cached colour+depth image per view; a frame copies
+    it and draws only what moved (bit-identical to a full redraw, see `_mark_static`);
+  - colour-only read-back of our own framebuffer (pyrender also reads and linearises depth).
+Anti-aliasing (4x multisampling through pyrender's framebuffer path) is optional and slower.
 
 Before each draw the renderer uploads the buffers the scene changed (`DentitionScene.buffer_versions`):
-contact-marker instances go into a preallocated instance buffer with `glBufferSubData`, grown by
-doubling, so a 2,000-frame run allocates a handful of GL buffers, not 2,000.
+contact markers go into a preallocated buffer with `glBufferSubData`, grown by doubling, so a
+2,000-frame run allocates a handful of GL buffers, not 2,000. One scene's GPU buffers live in one
+context: a scene is drawn by one renderer (switching a renderer between scenes re-uploads).
 """
 
 from __future__ import annotations
+
+import weakref
 
 import numpy as np
 
@@ -108,6 +115,14 @@ def _lean_renderer_class(pyrender, GL):
                 GL.glFramebufferRenderbuffer(GL.GL_FRAMEBUFFER, GL.GL_DEPTH_ATTACHMENT, GL.GL_RENDERBUFFER, db)
                 fbo = self._fbos[name] = (fb, cb, db)
             return fbo
+
+        def drop_caches(self, keep_scene) -> None:
+            for name in [n for n in self._fbos if n != "work" and n[1][0] != keep_scene]:
+                fb, cb, db = self._fbos.pop(name)
+                GL.glDeleteFramebuffers(1, [fb])
+                GL.glDeleteRenderbuffers(2, [cb, db])
+                self._cache_keys.pop(name[1], None)
+                self._previous_keys.pop(name[1], None)
 
         def delete_fbos(self):
             for fb, cb, db in self._fbos.values():
@@ -277,8 +292,9 @@ class Renderer:
         self.lean = lean
         self.lighting = lighting if lean else "pixel"
         self.static_cache = static_cache and lean and not msaa
-        self._seen_versions: dict[object, int] = {}
-        self._instance_capacity: dict[object, int] = {}
+        # weak keys: a renderer that outlives many scenes must not keep their meshes alive
+        self._seen_versions = weakref.WeakKeyDictionary()
+        self._instance_capacity = weakref.WeakKeyDictionary()
         self._flags = pyrender.RenderFlags.NONE
         if msaa:
             self._flags |= pyrender.RenderFlags.OFFSCREEN | pyrender.RenderFlags.RGBA
@@ -348,6 +364,7 @@ class Renderer:
         inner.static_nodes = frozenset(d.node for d in static)
         inner.static_key = key
         inner.cache_name = (scene.uid, view)
+        inner.drop_caches(keep_scene=scene.uid)  # cached images of other scenes are dead weight
 
     def _read_msaa_colour(self, scene, flags):
         GL = self._GL
@@ -368,7 +385,9 @@ class Renderer:
                 continue
             self._seen_versions[prim] = version
             if not prim._in_context():
-                continue  # first draw: pyrender uploads everything as it is now
+                # first draw, or back after another scene: pyrender uploads the arrays as they are
+                self._instance_capacity.pop(prim, None)
+                continue
             if prim is scene.markers:
                 self._upload_markers(prim)
             else:
