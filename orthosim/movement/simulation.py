@@ -67,7 +67,7 @@ class MovementSettings:
     resistance_fraction: float = 0.4
     rate: RateLaw = RateLaw()
     contact_tolerance_mm: float = 0.02
-    touch_tolerance_mm: float = 0.1
+    touch_tolerance_mm: float = 0.05
     rounds: int = 4
 
     @classmethod
@@ -416,6 +416,16 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
         touching_set = set(touching)
         events: list[CollisionEvent] = []
 
+        def approaching(pair, current) -> bool:
+            # continuous: touching teeth that slide along each other can still sink in, so the
+            # exact meshes decide (closer, or intersecting, at the end of the motion);
+            # discrete detectors only look at the end poses, and the crown centres decide
+            if detector != "continuous":
+                return _approaching(model, pair, current, dt, centers)
+            end = {n: (P1[n] if n in current else P[n]) for n in pair}
+            d0, d1 = _exact_distance(model, P, pair), _exact_distance(model, end, pair)
+            return d1 <= 0.0 or d1 < d0 - 1e-6
+
         def tested(current: dict[int, Motion], skip: set) -> list[tuple[int, int]]:
             out = []
             for pair in model.pairs:
@@ -425,7 +435,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                 if pair in model.facing and not (_vertical_mover(current.get(a), centers[a], dt)
                                                  or _vertical_mover(current.get(b), centers[b], dt)):
                     continue
-                if pair in touching_set and not _approaching(model, pair, current, dt, centers):
+                if pair in touching_set and not approaching(pair, current):
                     continue
                 out.append(pair)
             return out
@@ -446,6 +456,8 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                     break
                 for pair, t in hits:
                     done.add(pair)
+                    if pair in touching_set:
+                        continue  # a contact held from the last step stops the tooth; it is no new collision
                     P_at = dict(P1)
                     for n in pair:
                         if n in tcut:
@@ -464,7 +476,8 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
             if pairs:
                 res = detect_step(model.collision, P, P1, pairs, detector)
                 for pair in res.touching_pairs():
-                    events.append(CollisionEvent(pair, 1.0, _impact(model, pair, motions, P1, dt, centers, s.restitution)))
+                    if pair not in touching_set:
+                        events.append(CollisionEvent(pair, 1.0, _impact(model, pair, motions, P1, dt, centers, s.restitution)))
         moved = frozenset(n for n in motions if not np.allclose(P1[n], P[n], atol=1e-12))
         P = P1
         # 4. contacts, interpenetration, distances
