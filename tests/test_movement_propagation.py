@@ -56,3 +56,54 @@ def test_propagation_stops_where_the_force_no_longer_moves_a_tooth():
     assert np.allclose(bal.received[2], 50 * X)
     assert np.allclose(bal.received[3], 25 * X)  # 2 had 50 cN: enough, it passed on
     assert np.allclose(bal.received[4], 0)  # 3 had 25 cN: below threshold, nothing passed
+
+
+# --- in the running simulator -------------------------------------------------------------------
+
+@pytest.mark.parametrize("share", [0.5, 0.7])
+def test_a_molar_pushing_two_touching_teeth_moves_the_free_end_at_the_rate_of_its_share(tmp_path, share):
+    """Upper right 17-16-15 touch; 14 is out, so 15 has room. 400 cN on 17 toward 16: 16 receives
+    share x 400, 15 receives share x that (less the arch's turn), and 15 moves at the rate of what
+    it receives; 16 and 17, blocked, follow it."""
+    from collision_helpers import median_split_tree
+    from orthosim.case import load_case
+    from orthosim.collision import CollisionModel
+    from orthosim.movement import MovementModel, simulate
+    from orthosim.movement.biomechanics import RateLaw
+    from orthosim.parametric import parametric_dentition
+
+    p = tmp_path / "chain.toml"
+    p.write_text(f"""
+[model]
+kind = "parametric"
+resolution = "coarse"
+[treatment]
+extractions = [14]
+duration_days = 28
+step_days = 7
+[simulation]
+force_share = {share}
+[[loads]]
+teeth = [17]
+force_cN = 400
+direction = "mesial"
+movement = "translation"
+""")
+    case = load_case(p)
+    dent = parametric_dentition("coarse")
+    model = MovementModel.build(case, dent, CollisionModel.from_dentition(dent, tree_builder=median_split_tree))
+    recs = list(simulate(model, "continuous"))
+    c = {n: dent.teeth[n].to_world(dent.teeth[n].crown_center) for n in (17, 16, 15)}
+    n1 = (c[16] - c[17]) * [1, 0, 1]
+    n2 = (c[15] - c[16]) * [1, 0, 1]
+    n1, n2 = n1 / np.linalg.norm(n1), n2 / np.linalg.norm(n2)
+    f = recs[1].forces
+    assert np.allclose(f.received[16], share * 400 * n1, atol=1e-6)
+    assert np.allclose(f.received[15], share * (share * 400 * (n1 @ n2)) * n2, atol=1e-6)
+    assert set(f.blocked_by) >= {16, 17} and 15 not in f.blocked_by
+    rate = RateLaw().rate(np.linalg.norm(f.received[15]), model.mechanics[15].root_area_mm2)
+    step1 = recs[1].poses[15][:3, 3] - recs[0].poses[15][:3, 3]
+    assert np.linalg.norm(step1) == pytest.approx(rate * 7, rel=1e-6)
+    moved = {n: np.linalg.norm(recs[-1].poses[n][:3, 3] - recs[0].poses[n][:3, 3]) for n in (15, 16, 17, 13)}
+    assert moved[13] == 0.0
+    assert moved[16] > 0.5 * moved[15] and moved[17] > 0.5 * moved[15]  # the chain closes up behind it
