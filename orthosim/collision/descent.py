@@ -62,8 +62,8 @@ def descend(model: CollisionModel, pair_idx: np.ndarray, may_touch: Callable, at
         na, nb = na[keep], nb[keep]
         if track_pair:
             pair = pair[keep]
-        ka, kb = model.child_count[na], model.child_count[nb]
-        leaf = (ka | kb) == 0
+        sa, sb = model.split_key[na], model.split_key[nb]  # radius of inner nodes, -1 at leaves
+        leaf = (sa < 0) & (sb < 0)
         if leaf.any():
             li = np.flatnonzero(leaf)
             la, lb = na[li], nb[li]
@@ -82,13 +82,14 @@ def descend(model: CollisionModel, pair_idx: np.ndarray, may_touch: Callable, at
             if first_only:
                 inner &= ~found[pair if track_pair else pair_of(na, nb)]
             ii = np.flatnonzero(inner)
-            na, nb, ka, kb = na[ii], nb[ii], ka[ii], kb[ii]
+            na, nb, sa, sb = na[ii], nb[ii], sa[ii], sb[ii]
             if track_pair:
                 pair = pair[ii]
-        split_a = (ka > 0) & ((kb == 0) | (model.radii[na] >= model.radii[nb]))
+        split_a = sa >= sb  # descend the larger sphere; a leaf (-1) is never split
         ia, ib = np.flatnonzero(split_a), np.flatnonzero(~split_a)
-        ca, oa, pa = _expand(model, na[ia], nb[ia], ka[ia], pair[ia] if track_pair else None)
-        cb, ob, pb = _expand(model, nb[ib], na[ib], kb[ib], pair[ib] if track_pair else None)
+        pa_, pb_ = na[ia], nb[ib]
+        ca, oa, pa = _expand(model, pa_, nb[ia], model.child_count[pa_], pair[ia] if track_pair else None)
+        cb, ob, pb = _expand(model, pb_, na[ib], model.child_count[pb_], pair[ib] if track_pair else None)
         na = np.concatenate([ca, ob])
         nb = np.concatenate([oa, cb])
         if track_pair:

@@ -86,6 +86,8 @@ class CollisionModel:
         self.rho = np.linalg.norm(self.centers, axis=2).reshape(-1)
         self._centers_by_axis = np.ascontiguousarray(np.moveaxis(self.centers, 2, 0))  # (3, n, width)
         self.radii32 = (self.radii + FLOAT32_MARGIN_MM).astype(np.float32)
+        # what the descent compares to choose which node to split: the radius, -1 for leaves
+        self.split_key = np.where(self.child_count > 0, self.radii, -1.0).astype(np.float32)
         self._circle = _circle_data(self.bodies)
         self.rho_max = np.array([np.linalg.norm(b.mesh.vertices, axis=1).max() for b in self.bodies])
         self._fcl: dict[int, object] = {}
