@@ -39,8 +39,9 @@ class FitOptions:
     medial_cap_mm: float = 4.0  # rho capped at this depth, mm
     medial_samples: int = 4000  # faces on which rho is estimated
     lloyd_iterations: int = 12
-    grid_points: int = 300_000  # cells of the voxel grid over the tooth's bounds (sets spacing)
-    band_mm: float = 1.5  # thickness of the outside band that scores spheres, mm
+    voxel_mm: float = 0.15  # spacing of the outside-band voxels that score spheres, mm
+    max_voxels: int = 4_000_000  # the spacing grows on huge meshes to keep the grid this small
+    band_mm: float = 0.75  # thickness of the outside band that scores spheres, mm
     depths: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0)  # x patch radius
     search_rounds: int = 8
     reassign_rounds: int = 3
@@ -149,7 +150,7 @@ def _outside_band(vertices: np.ndarray, faces: np.ndarray, options: FitOptions) 
     """Centres of the voxels outside the tooth within `band_mm` of it: (n, 3) mm, and the voxel size, mm."""
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
     lo, hi = lo - options.band_mm, hi + options.band_mm
-    h = float(np.prod(hi - lo) / options.grid_points) ** (1 / 3)
+    h = max(options.voxel_mm, float(np.prod(hi - lo) / options.max_voxels) ** (1 / 3))
     shape = tuple(int(n) for n in np.ceil((hi - lo) / h).astype(np.int64) + 1)
     # An irrational shift keeps voxel centres off the mesh's own (often round-numbered) coordinates.
     origin = lo - h * 0.318309886
