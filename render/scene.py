@@ -180,10 +180,17 @@ class DentitionScene:
             if self._frame_points is not None:
                 pts = [self._frame_points]
             else:
-                pts = [self.dentition.teeth[f].world_mesh().vertices for f in self.dentition.fdis
-                       if arch_of(f) in arches]
+                pts = [self._drawn_vertices(f) for f in self.dentition.fdis if arch_of(f) in arches]
             self._views[name] = frame_view(name, np.concatenate(pts), self.size)
         return self._views[name]
+
+    def _drawn_vertices(self, fdi: int) -> np.ndarray:
+        """(n, 3) arch-frame rest-pose vertices of what is drawn of `fdi` (crown only with hide_roots)."""
+        t = self.dentition.teeth[fdi]
+        v = t.mesh.vertices
+        if self.hide_roots:
+            v = v[np.unique(t.mesh.faces[t.face_part == CROWN])]
+        return t.to_world(v)
 
     def set_view(self, name: str) -> CameraView:
         v = self.view(name)
