@@ -133,17 +133,24 @@ def assign_faces(tree: SphereTree, vertices: np.ndarray, faces: np.ndarray, tol:
     Candidates are the k leaves with the nearest centres and the k largest leaves.
     """
     faces = np.asarray(faces)
-    return np.concatenate([_assign(tree, vertices[faces[s : s + chunk]], tol, k) for s in range(0, len(faces), chunk)])
-
-
-def _assign(tree: SphereTree, tri: np.ndarray, tol: float, k: int) -> np.ndarray:
     centers, radii = tree.leaf_centers, tree.leaf_radii
-    k = min(k, len(radii))
-    # Candidates: the leaves with the nearest centres, and the largest leaves (which may reach far).
-    _, near = cKDTree(centers).query(tri.mean(axis=1), k=k)
-    near = near.reshape(len(tri), -1)
-    big = np.argsort(radii)[::-1][:k]
-    cand = np.concatenate([near, np.broadcast_to(big, (len(tri), len(big)))], axis=1)
+    out = []
+    for s in range(0, len(faces), chunk):
+        tri = vertices[faces[s : s + chunk]]
+        # Candidates: the leaves with the nearest centres, and the largest leaves (which may reach far).
+        k = min(k, len(radii))
+        _, near = cKDTree(centers).query(tri.mean(axis=1), k=k)
+        big = np.argsort(radii)[::-1][:k]
+        leaf = _assign(tree, tri, np.concatenate([near.reshape(len(tri), -1), np.broadcast_to(big, (len(tri), k))], axis=1), tol)
+        # The rare face whose holder is neither near nor large: try every leaf.
+        for i in np.flatnonzero(leaf < 0):
+            leaf[i] = _assign(tree, tri[i : i + 1], np.arange(len(radii))[None, :], tol)[0]
+        out.append(leaf)
+    return np.concatenate(out)
+
+
+def _assign(tree: SphereTree, tri: np.ndarray, cand: np.ndarray, tol: float) -> np.ndarray:
+    """(f, 3, 3) triangles, (f, c) candidate leaves -> (f,) best candidate holding it with its ancestors, or -1."""
     spare = np.full(cand.shape, np.inf)
     node = cand
     for level in range(tree.depth - 1, -1, -1):

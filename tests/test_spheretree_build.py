@@ -1,0 +1,101 @@
+"""Sphere trees hold their tooth: every surface point inside the leaves, every level inside its parent.
+
+These are the claims the collision detectors stand on: a descent that prunes a node never loses a
+contact below it, and an overlapping leaf pair is where the teeth touch.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from orthosim.errors import SphereTreeError
+from orthosim.spheretree import build_sphere_tree
+from orthosim.spheretree.measure import count_holding, surface_samples
+
+REAL_MOLAR = Path("/work/shared/data/open-full-jaw-patient26/maxilla/tooth_3.stl")
+
+
+def parametric_tooth(fdi: int = 36, resolution: str = "medium") -> trimesh.Trimesh:
+    from orthosim.anatomy import dimensions
+    from orthosim.fdi import arch_of, tooth_type
+    from orthosim.toothshape import build_tooth_shape
+
+    return build_tooth_shape(dimensions(fdi), arch_of(fdi), tooth_type(fdi), resolution).mesh
+
+
+def assert_conservative(tree, mesh: trimesh.Trimesh, n_surface: int = 100_000) -> None:
+    """Random surface points lie in the union of the leaves, and each level holds its parent's part."""
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    rng = np.random.default_rng(7)
+    pts = surface_samples(v, f, n_surface, rng)
+    held = count_holding(pts, tree.leaf_centers, tree.leaf_radii)
+    assert (held > 0).all(), f"{int((held == 0).sum())} of {n_surface} surface samples outside every leaf"
+    # Exact per face: each triangle inside its leaf and inside every ancestor of that leaf.
+    tree.validate(v, f)
+    # And per level: the triangles a child holds are inside its parent too, level by level.
+    tri = v[f]
+    node = tree.leaf_of_face
+    for k in range(tree.depth - 1, 0, -1):
+        parent = tree.parents[k][node]
+        d_child = np.linalg.norm(tri - tree.centers[k][node][:, None], axis=2).max(axis=1)
+        d_parent = np.linalg.norm(tri - tree.centers[k - 1][parent][:, None], axis=2).max(axis=1)
+        assert (d_child <= tree.radii[k][node] + 1e-9).all()
+        assert (d_parent <= tree.radii[k - 1][parent] + 1e-9).all()
+        node = parent
+
+
+@pytest.mark.parametrize("method,depth", [("fit", 4), ("octree", 5)])
+def test_parametric_molar_is_covered_by_its_leaves(method, depth):
+    mesh = parametric_tooth(36)
+    tree = build_sphere_tree(mesh, method=method, branching=8, depth=depth)
+    assert tree.depth == depth and tree.n_leaves <= 8 ** (depth - 1)
+    assert_conservative(tree, mesh)
+
+
+def test_fit_tree_has_the_papers_shape():
+    """Branching 8, depth 4: a root, up to 8, 64 and 512 spheres, each node at most 8 children."""
+    mesh = parametric_tooth(11)
+    tree = build_sphere_tree(mesh, method="fit", branching=8, depth=4)
+    sizes = [len(r) for r in tree.radii]
+    assert sizes[0] == 1 and sizes[1] <= 8 and sizes[2] <= 64 and 300 <= sizes[3] <= 512
+    for k in range(1, 4):
+        assert np.bincount(tree.parents[k]).max() <= 8
+        assert (np.diff(tree.parents[k]) >= 0).all()
+
+
+def test_octree_spheres_are_equal_per_level_on_a_fine_mesh():
+    """On a mesh much finer than the cells, every sphere of a level is the cell's circumsphere."""
+    mesh = trimesh.creation.icosphere(subdivisions=5, radius=5.0)
+    tree = build_sphere_tree(mesh, method="octree", depth=4)
+    side = mesh.extents.max()
+    for k in range(4):
+        assert np.allclose(tree.radii[k], 0.5 * np.sqrt(3) * side / 2**k, rtol=1e-6)
+    assert_conservative(tree, mesh)
+
+
+def test_other_branching_factors_keep_coverage():
+    mesh = trimesh.creation.capsule(height=10.0, radius=3.0, count=[24, 24])
+    tree = build_sphere_tree(mesh, method="fit", branching=4, depth=5)
+    assert np.bincount(tree.parents[-1]).max() <= 4
+    assert_conservative(tree, mesh, n_surface=100_000)
+
+
+@pytest.mark.skipif(not REAL_MOLAR.exists(), reason="Open-Full-Jaw data not present")
+def test_real_molar_is_covered_by_its_leaves():
+    mesh = trimesh.load(REAL_MOLAR)
+    tree = build_sphere_tree(mesh, method="fit")
+    assert_conservative(tree, mesh, n_surface=200_000)
+
+
+def test_bad_requests_name_the_option():
+    mesh = trimesh.creation.box((2, 2, 2))
+    with pytest.raises(SphereTreeError, match="branch"):
+        build_sphere_tree(mesh, method="octree", branching=4)
+    with pytest.raises(SphereTreeError, match="method"):
+        build_sphere_tree(mesh, method="medial")
+    with pytest.raises(SphereTreeError, match="depth"):
+        build_sphere_tree(mesh, method="fit", depth=0)

@@ -1,0 +1,113 @@
+"""Trees travel: Bradshaw's .sph format both ways, and the on-disk cache returns the very same tree."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from orthosim.errors import SphereTreeError
+from orthosim.spheretree import SphereTree, build_sphere_tree, cached_sphere_tree, read_sph, write_sph
+from orthosim.spheretree.cache import cache_key, save_tree
+
+
+def _mesh() -> trimesh.Trimesh:
+    return trimesh.creation.capsule(height=8.0, radius=2.5, count=[20, 20])
+
+
+def _same(a, b) -> None:
+    assert a.branching == b.branching and a.depth == b.depth
+    for k in range(a.depth):
+        np.testing.assert_array_equal(a.centers[k], b.centers[k])
+        np.testing.assert_array_equal(a.radii[k], b.radii[k])
+        np.testing.assert_array_equal(a.parents[k], b.parents[k])
+
+
+@pytest.mark.parametrize("method,depth", [("fit", 4), ("octree", 5)])
+def test_sph_round_trip_is_exact_and_stays_conservative(tmp_path, method, depth):
+    mesh = _mesh()
+    tree = build_sphere_tree(mesh, method=method, depth=depth)
+    path = tmp_path / "11.sph"
+    write_sph(tree, path)
+    lines = path.read_text().splitlines()
+    assert lines[0].split() == [str(depth), "8"]
+    assert len(lines) == 1 + sum(8**k for k in range(depth))  # every slot of the complete tree
+    back = read_sph(path, mesh.vertices, mesh.faces)
+    _same(tree, back)
+    assert (back.leaf_of_face >= 0).all()
+    back.validate(mesh.vertices, mesh.faces)
+    assert len(read_sph(path).leaf_of_face) == 0  # without a mesh, no faces to assign
+
+
+def test_bradshaw_file_with_absent_and_childless_nodes(tmp_path):
+    """Slots with radius <= 0 are absent; a node without children is carried to the leaf level."""
+    B = 2
+    rows = ["3 2",
+            "0 0 0 3 0",  # root
+            "-1 0 0 2 0", "1 0 0 2 0",  # level 1: both present
+            "-1.5 0 0 1 0", "-0.5 0 0 1 0",  # children of node 1 (slot 1 -> slots 3, 4)
+            "0 0 0 0 0", "0 0 0 -1 0"]  # node 2 has no children
+    path = tmp_path / "b.sph"
+    path.write_text("\n".join(rows) + "\n")
+    tree = read_sph(path)
+    assert [len(r) for r in tree.radii] == [1, 2, 3]
+    np.testing.assert_array_equal(tree.parents[2], [0, 0, 1])
+    np.testing.assert_allclose(tree.leaf_centers[2], [1, 0, 0])  # node 2, carried down
+    assert tree.branching == B
+
+
+@pytest.mark.parametrize("text,field", [
+    ("", "line 1"),
+    ("four 8\n", "line 1"),
+    ("2 2\n0 0 0 1 0\n0 0 0 1 0\n", None),  # truncated: needs 3 sphere lines
+    ("2 2\n0 0 0 1 0\n0 0 x 1 0\n0 0 0 1 0\n", "line 3"),
+    ("2 2\n0 0 0 0 0\n0 0 0 1 0\n0 0 0 1 0\n", "line 2"),  # root missing
+])
+def test_malformed_sph_files_are_refused_with_the_line(tmp_path, text, field):
+    path = tmp_path / "bad.sph"
+    path.write_text(text)
+    with pytest.raises(SphereTreeError) as err:
+        read_sph(path)
+    assert str(path) in str(err.value)
+    if field:
+        assert field in str(err.value)
+
+
+def test_cache_returns_the_identical_tree(tmp_path):
+    mesh = _mesh()
+    first = cached_sphere_tree(mesh, cache_dir=tmp_path)
+    files = list(tmp_path.glob("*.npz"))
+    assert len(files) == 1
+    second = cached_sphere_tree(mesh, cache_dir=tmp_path)
+    _same(first, second)
+    np.testing.assert_array_equal(first.leaf_of_face, second.leaf_of_face)
+    assert second.method == "fit"
+    # The second call really reads the file: a tree planted under the key is what comes back.
+    planted = SphereTree(first.branching, first.centers, tuple(r * 2 for r in first.radii), first.parents,
+                         first.leaf_of_face, "planted")
+    save_tree(planted, files[0])
+    third = cached_sphere_tree(mesh, cache_dir=tmp_path)
+    assert third.method == "planted"
+    np.testing.assert_array_equal(third.leaf_radii, 2 * first.leaf_radii)
+
+
+def test_cache_key_follows_mesh_and_request(tmp_path):
+    mesh = _mesh()
+    v, f = mesh.vertices, mesh.faces
+    base = cache_key(v, f, "fit", 8, 4)
+    assert base == cache_key(v.copy(), f.copy(), "fit", 8, 4)
+    assert base != cache_key(v, f, "fit", 8, 3)
+    assert base != cache_key(v, f, "octree", 8, 4)
+    moved = v.copy()
+    moved[0, 0] += 1e-9
+    assert base != cache_key(moved, f, "fit", 8, 4)
+
+
+def test_damaged_cache_entry_is_rebuilt(tmp_path):
+    mesh = _mesh()
+    tree = cached_sphere_tree(mesh, cache_dir=tmp_path)
+    (path,) = tmp_path.glob("*.npz")
+    path.write_bytes(b"not a zip file")
+    again = cached_sphere_tree(mesh, cache_dir=tmp_path)
+    _same(tree, again)
+    assert path.stat().st_size > 100
