@@ -85,7 +85,7 @@ def check(cases: tuple[Path, ...]) -> None:
 
 @main.command()
 @click.option("--case", "case", type=click.Path(path_type=Path), default=None,
-              help="Case to measure (default: cases/case3_incisor_space_closure.toml, 28 teeth with loads).")
+              help="Case to measure (default: cases/case1_first_premolar_extraction.toml, the paper's case 1).")
 @click.option("--out", "out_file", type=click.Path(path_type=Path), required=True, help="Where to write the JSON record.")
 @click.option("--size", default="640x480", show_default=True, callback=_size, help="Image size WIDTHxHEIGHT.")
 @click.option("--frames", default=300, show_default=True, type=click.IntRange(1), help="Measured frames per figure (after warm-up).")
