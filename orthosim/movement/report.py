@@ -7,7 +7,8 @@
 
 metrics.json: `case`, `detector`, `steps`, `teeth` {FDI: `moved_mm` (crown centre displacement),
 `rotated_deg`, `final_pose` (4x4, mm)}, `total_distance_mm` {`initial`, `final`},
-`max_penetration_mm` (exact meshes, over the run), `collisions` (count), `distances` (per adjacent
+`max_penetration_mm` (exact meshes, over the run: the deepest
+interpenetration the movement added to any pair; `initial_penetration_mm` is the model's own), `collisions` (count), `distances` (per adjacent
 pair: `pair`, `initial_mm`, `final_mm`), and `per_step`: for every step its time (days), the pose of
 every tooth, the touching pairs, the tooth-to-tooth distances and their total, the largest
 interpenetration, the collisions (with the impact response) and the propagated forces (cN).
@@ -98,6 +99,7 @@ class RunReport:
             "teeth": teeth,
             "total_distance_mm": {"initial": first.total_distance_mm, "final": last.total_distance_mm},
             "max_penetration_mm": self.max_penetration_mm,
+            "initial_penetration_mm": first.raw_penetration_mm,
             "collisions": self.collisions,
             "distances": [{"pair": list(a.pair), "initial_mm": a.distance_mm, "final_mm": b.distance_mm}
                           for a, b in zip(first.distances, last.distances)],

@@ -97,8 +97,10 @@ class StepRecord:
     moving: teeth that moved in the step. touching: pairs in contact at the step's end.
     contact_centers (n, 3) mm / contact_radii (n,) mm: overlapping leaf spheres of touching pairs.
     collisions: events of the step. forces: the step's force balance (cN).
-    max_penetration_mm: deepest interpenetration of any candidate pair on the exact meshes.
+    max_penetration_mm: deepest interpenetration the run has added to any candidate pair, on the
+        exact meshes (mm; depth now less depth in the initial model, which may have some).
     distances: the paper's tooth-to-tooth distances (mm) per adjacent pair.
+    raw_penetration_mm: deepest interpenetration of any candidate pair as it stands (mm).
     """
 
     step: int
@@ -112,6 +114,7 @@ class StepRecord:
     forces: ForceBalance | None
     max_penetration_mm: float
     distances: tuple[PairDistance, ...]
+    raw_penetration_mm: float = 0.0
 
     @property
     def total_distance_mm(self) -> float:
@@ -306,6 +309,18 @@ def _approaching(model, pair, motions, dt, centers) -> bool:
     return float((da - db) @ n) > 1e-9
 
 
+def _at_fault(model, pair, motions, dt, centers) -> tuple[int, ...]:
+    """The teeth of a colliding pair whose own motion runs into the other (both when neither
+    clearly does, e.g. a contact made by turning): those are the ones a contact stops."""
+    a, b = pair
+    p = 0.5 * (centers[a] + centers[b])
+    n = _normal(model, pair, centers)
+    ga = float(motions[a].displacement(p, dt)[0] @ n) if a in motions else 0.0
+    gb = -float(motions[b].displacement(p, dt)[0] @ n) if b in motions else 0.0
+    out = tuple(t for t, g in ((a, ga), (b, gb)) if g > 1e-9)
+    return out or pair
+
+
 def _vertical_mover(m: Motion | None, point: np.ndarray, dt: float) -> bool:
     if m is None:
         return False
@@ -345,16 +360,21 @@ def _exact_distance(model: MovementModel, P, pair) -> float:
     return exact.distance(*_fcl_pair(model, P, pair))
 
 
-def max_penetration(model: MovementModel, P: Mapping[int, np.ndarray]) -> float:
-    """mm: the deepest interpenetration of any candidate pair at poses P, on the exact meshes
-    (FCL finds the intersecting pairs, `exact.penetration_depth` measures them)."""
-    worst = 0.0
+def penetrations(model: MovementModel, P: Mapping[int, np.ndarray]) -> dict[tuple[int, int], float]:
+    """mm per intersecting candidate pair at poses P, on the exact meshes (FCL finds the
+    intersecting pairs, `exact.penetration_depth` measures how deep)."""
+    out = {}
     for a, b in model.pairs:
         hit, _ = exact.collide(*_fcl_pair(model, P, (a, b)))
         if hit:
             ta, tb = model.dentition.teeth[a], model.dentition.teeth[b]
-            worst = max(worst, exact.penetration_depth(ta.mesh, P[a], tb.mesh, P[b]))
-    return worst
+            out[(a, b)] = exact.penetration_depth(ta.mesh, P[a], tb.mesh, P[b])
+    return out
+
+
+def _deepening(depths: dict, initial: dict) -> float:
+    """mm: the largest interpenetration the run has added to any pair (a model may start with some)."""
+    return max((d - initial.get(p, 0.0) for p, d in depths.items()), default=0.0)
 
 
 def _impact(model: MovementModel, pair, motions, P_contact, dt, centers, restitution) -> dict:
@@ -391,8 +411,9 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
     P = {n: np.asarray(T, float).copy() for n, T in model.dentition.rest_poses().items()}
     touching, leaves = _touching(model, detector, P)
     dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
+    initial_depths = penetrations(model, P)
     yield StepRecord(0, 0.0, {n: T.copy() for n, T in P.items()}, frozenset(), tuple(touching), leaves[0], leaves[1],
-                     (), None, max_penetration(model, P), dist)
+                     (), None, 0.0, dist, max(initial_depths.values(), default=0.0))
     for k in range(1, n_steps + 1):
         centers = _crown_centers(model, P)
         # 1. forces
@@ -415,6 +436,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
         # 3. collisions
         touching_set = set(touching)
         events: list[CollisionEvent] = []
+        tested_pairs: set = set()
 
         def approaching(pair, current) -> bool:
             # continuous: touching teeth that slide along each other can still sink in, so the
@@ -448,6 +470,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
             for _ in range(s.rounds):
                 current = {n: m for n, m in motions.items() if tcut[n] > 0}
                 pairs = tested(_scaled(current, tcut), done)
+                tested_pairs.update(pairs)
                 if not pairs:
                     break
                 res = detect_step(model.collision, P, P1, pairs, "continuous", request)
@@ -464,8 +487,9 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                             P_at[n] = interpolate_pose(P[n], P1[n], t)
                     events.append(CollisionEvent(pair, t * _frac(tcut, pair), _impact(model, pair, motions, P_at, dt, centers, s.restitution)))
                 cut: dict[int, float] = {}
+                scaled = _scaled(motions, tcut)
                 for pair, t in hits:
-                    for n in pair:
+                    for n in _at_fault(model, pair, scaled, dt, centers):
                         if n in tcut:
                             cut[n] = min(cut.get(n, 1.0), t)
                 for n, t in cut.items():
@@ -473,6 +497,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                     tcut[n] *= t
         else:
             pairs = tested(motions, set())
+            tested_pairs.update(pairs)
             if pairs:
                 res = detect_step(model.collision, P, P1, pairs, detector)
                 for pair in res.touching_pairs():
@@ -484,14 +509,15 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
         before = touching_set
         touching, leaves = _touching(model, detector, P)
         # a moving tooth that made a new contact without a reported hit (it stopped within the
-        # touching tolerance, or a discrete test missed the instant) has collided too
+        # touching tolerance) has collided too; teeth sliding over the other arch's have not
         seen = {e.pair for e in events}
         for pair in touching:
-            if pair not in before and pair not in seen and (pair[0] in moved or pair[1] in moved):
+            if pair not in before and pair not in seen and pair in tested_pairs:
                 events.append(CollisionEvent(pair, 1.0, _impact(model, pair, motions, P, dt, centers, s.restitution)))
         dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
         yield StepRecord(k, k * dt, {n: T.copy() for n, T in P.items()}, moved, tuple(touching), leaves[0], leaves[1],
-                         tuple(events), balance, max_penetration(model, P), dist)
+                         tuple(events), balance, max(0.0, _deepening(depths := penetrations(model, P), initial_depths)), dist,
+                         max(depths.values(), default=0.0))
 
 
 def _scaled(motions: dict[int, Motion], tcut: dict[int, float]) -> dict[int, Motion]:
