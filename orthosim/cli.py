@@ -111,34 +111,45 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
 
 
 def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> None:
-    from .atomic import write_json
+    """Simulate the case (orthosim.movement), draw its steps unless --no-render, write
+    out_dir/metrics.json and out_dir/distances.csv."""
     from .case import load_case
-    from .metrics import model_summary, tooth_to_tooth_distances
+    from .metrics import model_summary
+    from .movement.report import RunReport
+    from .movement.simulation import MovementModel, simulate
 
     case = load_case(case_path)
+    detector = detector or case.detector
     started = time.perf_counter()
-    dent = case.build_dentition()
-    extracted = set(case.extractions)
-    poses = dent.rest_poses()
-    distances = tooth_to_tooth_distances(dent, poses, extracted)
-    summary = model_summary(dent, poses)
-    metrics = {
-        "case": case.name,
-        "case_file": str(case.path),
-        "detector": detector or case.detector,
-        "model": {"description": dent.description, **dent.info},
-        "simulated": False,  # tooth movement is not implemented yet: this is the initial model
-        "steps": 0,
-        "extracted": sorted(extracted),
-        **summary,
-        "distances": [{"pair": list(d.pair), "initial_mm": d.distance_mm} for d in distances],
-        "total_distance_mm": {"initial": sum(d.distance_mm for d in distances)},
-    }
-    if not render_opts.get("no_render"):
-        metrics.update(_render_initial(dent, poses, extracted, out_dir, render_opts))
-    metrics["wall_s"] = time.perf_counter() - started
-    write_json(out_dir / "metrics.json", metrics)
-    click.echo(f"{case.name}: {len(dent.teeth)} teeth, {len(extracted)} extracted -> {out_dir}/metrics.json")
+    model = MovementModel.build(case)
+    dent, extracted = model.dentition, set(case.extractions)
+    report = RunReport(model, detector)
+    records = report.collect(simulate(model, detector))
+    extra: dict = {"model": {"description": dent.description, **dent.info}, "simulated": True}
+    if render_opts.get("no_render"):
+        for _ in records:
+            pass
+    else:
+        extra.update(_render_steps(dent, records, extracted, out_dir, render_opts))
+    extra["occlusion"] = model_summary(dent, dent.rest_poses()).get("occlusion")  # the initial model's
+    extra["occlusion_final"] = model_summary(dent, {n: report.last.poses[n] for n in dent.fdis}).get("occlusion")
+    extra["wall_s"] = time.perf_counter() - started
+    metrics = report.write(out_dir, extra)
+    click.echo(f"{case.name} ({detector}): {metrics['steps']} steps, total distance "
+               f"{metrics['total_distance_mm']['initial']:.2f} -> {metrics['total_distance_mm']['final']:.2f} mm, "
+               f"{metrics['collisions']} collisions, max penetration {metrics['max_penetration_mm']:.3f} mm -> {out_dir}/metrics.json")
+
+
+def _render_steps(dent, records, extracted, out_dir: Path, opts: dict) -> dict:
+    """Render every simulated step (one frame per step and view) into out_dir/frames."""
+    from render.animation import render_run
+    from render.frame_state import FrameState
+
+    frames = (FrameState.from_step(r, extracted) for r in records)
+    return render_run(dent, frames, out_dir, views=opts.get("views") or ("frontal",), size=opts["size"],
+                      gif=opts.get("gif", False), alpha=opts.get("alpha", False),
+                      hide_roots=opts.get("hide_roots", False),
+                      color_contact_faces=opts.get("contact_faces", False))
 
 
 def _render_initial(dent, poses, extracted, out_dir: Path, opts: dict) -> dict:

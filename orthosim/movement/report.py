@@ -6,7 +6,7 @@
     report.write(out_dir)
 
 metrics.json: `case`, `detector`, `steps`, `teeth` {FDI: `moved_mm` (crown centre displacement),
-`rotated_deg`, `final_pose` (4x4, mm)}, `total_distance_mm` {`initial`, `final`},
+`rotated_deg`, `final_pose` (4x4, mm), `extracted`}, `total_distance_mm` {`initial`, `final`},
 `max_penetration_mm` (exact meshes, over the run: the deepest
 interpenetration the movement added to any pair; `initial_penetration_mm` is the model's own), `collisions` (count), `distances` (per adjacent
 pair: `pair`, `initial_mm`, `final_mm`), and `per_step`: for every step its time (days), the pose of
@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
+from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -38,6 +39,12 @@ class RunReport:
         self.max_penetration_mm = 0.0
         self.collisions = 0
         self.per_step: list[dict] = []
+
+    def collect(self, records: Iterable[StepRecord]) -> Iterator[StepRecord]:
+        """Pass the records through, adding each (so a renderer can draw them as they come)."""
+        for rec in records:
+            self.add(rec)
+            yield rec
 
     def add(self, rec: StepRecord) -> None:
         if self.first is None:
@@ -71,7 +78,7 @@ class RunReport:
             raise ValueError("no step recorded")
         m, first, last = self.model, self.first, self.last
         teeth = {}
-        for n in m.present:
+        for n in m.dentition.fdis:
             t = m.dentition.teeth[n]
             c0 = t.to_world(t.crown_center, first.poses[n])
             c1 = t.to_world(t.crown_center, last.poses[n])
@@ -79,6 +86,7 @@ class RunReport:
                 "moved_mm": float(np.linalg.norm(c1 - c0)),
                 "rotated_deg": float(np.degrees(rotation_angle(first.poses[n], last.poses[n]))),
                 "final_pose": last.poses[n],
+                "extracted": n in m.extracted,
             }
         s = m.settings
         return {
