@@ -39,19 +39,25 @@ class FitOptions:
     medial_cap_mm: float = 4.0  # rho capped at this depth, mm
     medial_samples: int = 4000  # faces on which rho is estimated
     lloyd_iterations: int = 12
+    partition: str = "bottom_up"  # or "top_down": split the triangles level by level
+    area_weighted: bool = False  # k-means balances area (True) or triangle count (False)
     voxel_mm: float = 0.15  # spacing of the outside-band voxels that score spheres, mm
     max_voxels: int = 4_000_000  # the spacing grows on huge meshes to keep the grid this small
     band_mm: float = 0.75  # thickness of the outside band that scores spheres, mm
+    fine_band_mm: float = 0.3  # inner part of the band sampled at full resolution, mm
     depths: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0)  # x patch radius
     search_rounds: int = 8
     reassign_rounds: int = 3
     seed: int = 0
 
 
-def _batched_kmeans(features: np.ndarray, node: np.ndarray, n_nodes: int, k: int, iterations: int, rng) -> np.ndarray:
+def _batched_kmeans(
+    features: np.ndarray, node: np.ndarray, n_nodes: int, k: int, iterations: int, rng, weights: np.ndarray | None = None
+) -> np.ndarray:
     """Split the points of every node into at most k clusters at once.
 
-    `features` (F, d), `node` (F,) int: returns (F,) int label in [0, k) within each point's node.
+    `features` (F, d), `node` (F,) int, `weights` (F,) (e.g. triangle areas, so clusters balance
+    area rather than triangle count): returns (F,) int label in [0, k) within each point's node.
     Initial centres by farthest-point sampling per node (spread out, deterministic given rng).
     """
     F = len(features)
@@ -64,23 +70,22 @@ def _batched_kmeans(features: np.ndarray, node: np.ndarray, n_nodes: int, k: int
     pick = order[np.minimum(pick, F - 1)]
     centres[:, 0] = features[pick]
     mind = ((features - centres[node, 0]) ** 2).sum(axis=1)
-    sorted_node = node[order]
     for j in range(1, k):
         # Per-node argmax of mind: sort by (node, mind) and take the last of each node.
         o = np.lexsort((mind, node))
         last = o[np.cumsum(counts) - 1]
         centres[:, j] = features[last]
         mind = np.minimum(mind, ((features - centres[node, j]) ** 2).sum(axis=1))
-    del sorted_node
     # Nodes with fewer than k points repeat centres; duplicates simply stay empty.
     label = np.zeros(F, dtype=np.int64)
     for _ in range(iterations):
         d = ((features[:, None, :] - centres[node]) ** 2).sum(axis=2)  # (F, k)
         label = d.argmin(axis=1)
         key = node * k + label
-        cnt = np.bincount(key, minlength=n_nodes * k).reshape(n_nodes, k)
+        w = np.ones(F) if weights is None else weights
+        cnt = np.bincount(key, weights=w, minlength=n_nodes * k).reshape(n_nodes, k)
         sums = np.stack(
-            [np.bincount(key, weights=features[:, i], minlength=n_nodes * k) for i in range(features.shape[1])], axis=1
+            [np.bincount(key, weights=w * features[:, i], minlength=n_nodes * k) for i in range(features.shape[1])], axis=1
         ).reshape(n_nodes, k, -1)
         filled = cnt > 0
         centres[filled] = sums[filled] / cnt[filled][:, None]
@@ -128,6 +133,8 @@ def partition_faces(
         rho_sub = medial_radii(centroid[sub], normal[sub], vertices, options.medial_cap_mm)
         rho = rho_sub[cKDTree(centroid[sub]).query(centroid)[1]]
         centroid = centroid - (options.medial_pull * np.minimum(rho, options.medial_cap_mm))[:, None] * normal
+    if options.partition == "bottom_up" and depth > 1:
+        return _bottom_up(centroid, area, branching, depth, options, rng)
     node = np.zeros(len(faces), dtype=np.int64)
     node_of_face = [node]
     parents = [np.array([-1], dtype=np.int64)]
@@ -135,7 +142,8 @@ def partition_faces(
     for k in range(1, depth):
         patch = np.sqrt(total_area / branching**k)  # typical size of a node of this level, mm
         feats = np.concatenate([centroid, options.normal_weight * patch * normal], axis=1)
-        label = _batched_kmeans(feats, node, n_nodes, branching, options.lloyd_iterations, rng)
+        label = _batched_kmeans(feats, node, n_nodes, branching, options.lloyd_iterations, rng,
+                                area if options.area_weighted else None)
         # Number the non-empty (node, label) groups in order: sorted by parent by construction.
         key = node * branching + label
         used, new = np.unique(key, return_inverse=True)
@@ -146,8 +154,103 @@ def partition_faces(
     return node_of_face, parents
 
 
-def _outside_band(vertices: np.ndarray, faces: np.ndarray, options: FitOptions) -> tuple[np.ndarray, float]:
-    """Centres of the voxels outside the tooth within `band_mm` of it: (n, 3) mm, and the voxel size, mm."""
+def _farthest_points(points: np.ndarray, k: int, rng) -> np.ndarray:
+    """Indices of k points spread out by farthest-point sampling from a random start."""
+    chosen = [int(rng.integers(len(points)))]
+    mind = ((points - points[chosen[0]]) ** 2).sum(axis=1)
+    for _ in range(1, k):
+        chosen.append(int(mind.argmax()))
+        mind = np.minimum(mind, ((points - points[chosen[-1]]) ** 2).sum(axis=1))
+    return np.asarray(chosen)
+
+
+def _kmeans(points: np.ndarray, k: int, iterations: int, rng, weights: np.ndarray | None = None) -> np.ndarray:
+    """(n, d) points into at most k clusters (Lloyd, k-d tree assignment): (n,) labels 0..used-1."""
+    k = min(k, len(points))
+    centres = points[_farthest_points(points, k, rng)]
+    w = np.ones(len(points)) if weights is None else weights
+    for _ in range(iterations):
+        label = cKDTree(centres).query(points)[1]
+        cnt = np.bincount(label, weights=w, minlength=k)
+        sums = np.stack([np.bincount(label, weights=w * points[:, i], minlength=k) for i in range(points.shape[1])], 1)
+        filled = cnt > 0
+        centres[filled] = sums[filled] / cnt[filled][:, None]
+    label = cKDTree(centres).query(points)[1]
+    return np.unique(label, return_inverse=True)[1]
+
+
+def _split_with_capacity(points: np.ndarray, k: int, capacity: int, rng, iterations: int = 6) -> np.ndarray:
+    """(n, 3) points into at most k groups of at most `capacity` each (n <= k * capacity): (n,) labels.
+
+    k-means whose assignment step fills the nearest centres first, pair by pair in order of
+    distance, skipping full ones: groups stay compact and the tree keeps its branching factor.
+    """
+    n = len(points)
+    k = min(k, n)
+    centres = points[_farthest_points(points, k, rng)]
+    label = np.zeros(n, dtype=np.int64)
+    for _ in range(iterations):
+        d = ((points[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2)
+        order = np.argsort(d, axis=None, kind="stable")
+        label[:] = -1
+        room = np.full(k, capacity)
+        left = n
+        for flat in order:
+            i, j = divmod(int(flat), k)
+            if label[i] < 0 and room[j] > 0:
+                label[i] = j
+                room[j] -= 1
+                left -= 1
+                if not left:
+                    break
+        for j in range(k):
+            if (label == j).any():
+                centres[j] = points[label == j].mean(axis=0)
+    return label
+
+
+def _bottom_up(centroid: np.ndarray, area: np.ndarray, branching: int, depth: int, options: FitOptions, rng):
+    """Leaves first (k-means of all triangles into branching**(depth-1)), then group leaves upward.
+
+    Leaves are then free of the borders a top-down split would impose; the groups above are built
+    top-down over the leaves with a capacity, so every node keeps at most `branching` children.
+    """
+    leaf = _kmeans(centroid, branching ** (depth - 1), options.lloyd_iterations, rng,
+                   area if options.area_weighted else None)
+    n_leaves = int(leaf.max()) + 1
+    cnt = np.bincount(leaf, weights=area, minlength=n_leaves)
+    leaf_pos = np.stack([np.bincount(leaf, weights=area * centroid[:, i], minlength=n_leaves) for i in range(3)], 1)
+    leaf_pos /= cnt[:, None]
+    # path[i, k] = child index taken at level k+1 on the way from the root to leaf i.
+    path = np.zeros((n_leaves, depth - 1), dtype=np.int64)
+    groups = [np.arange(n_leaves)]
+    for level in range(1, depth):
+        capacity = branching ** (depth - 1 - level)
+        nxt = []
+        for g in groups:
+            lab = _split_with_capacity(leaf_pos[g], branching, capacity, rng) if len(g) > capacity else np.arange(len(g))
+            path[g, level - 1] = lab
+            nxt.extend(g[lab == j] for j in np.unique(lab))
+        groups = nxt
+    key = np.zeros(n_leaves, dtype=np.int64)
+    node_of_leaf, parents = [], [np.array([-1], dtype=np.int64)]
+    prev_nodes = np.zeros(n_leaves, dtype=np.int64)
+    node_of_leaf.append(prev_nodes)
+    for level in range(1, depth):
+        key = key * branching + path[:, level - 1]
+        used, nodes = np.unique(key, return_inverse=True)
+        first = np.zeros(len(used), dtype=np.int64)
+        first[nodes] = np.arange(n_leaves)
+        parents.append(prev_nodes[first])
+        node_of_leaf.append(nodes.astype(np.int64))
+        prev_nodes = nodes
+    return [n[leaf] for n in node_of_leaf], parents
+
+
+def _outside_band(vertices: np.ndarray, faces: np.ndarray, options: FitOptions) -> tuple[np.ndarray, np.ndarray, float]:
+    """Voxel centres outside the tooth within `band_mm` of it, (n, 3) mm: all those within
+    `fine_band_mm` (where the thin caps of good spheres lie), and every other one of each axis
+    beyond (bulges, which only need to be seen, counted 8 times); and the voxel size, mm."""
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
     lo, hi = lo - options.band_mm, hi + options.band_mm
     h = max(options.voxel_mm, float(np.prod(hi - lo) / options.max_voxels) ** (1 / 3))
@@ -156,8 +259,12 @@ def _outside_band(vertices: np.ndarray, faces: np.ndarray, options: FitOptions) 
     origin = lo - h * 0.318309886
     inside = CrossingIndex(vertices, faces).voxels(origin, h, shape)
     dist = ndimage.distance_transform_edt(~inside) * h
-    ijk = np.argwhere(~inside & (dist <= options.band_mm))
-    return origin + h * ijk, h
+    near = ~inside & (dist <= options.fine_band_mm)
+    far = ~inside & (dist > options.fine_band_mm) & (dist <= options.band_mm)
+    far[1::2] = False
+    far[:, 1::2] = False
+    far[:, :, 1::2] = False
+    return origin + h * np.argwhere(near), origin + h * np.argwhere(far), h
 
 
 class _LeafFitter:
@@ -165,13 +272,15 @@ class _LeafFitter:
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, options: FitOptions):
         self.vertices, self.faces, self.options = vertices, faces, options
-        band, self.voxel = _outside_band(vertices, faces, options)
-        self.outside = cKDTree(band)
+        near, far, self.voxel = _outside_band(vertices, faces, options)
+        self.near, self.far = cKDTree(near), cKDTree(far)
 
     def score(self, pts: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For padded patch points (L, M, 3) and centres (L, c, 3), mm: outside voxels held, radii (L, c)."""
         r = np.sqrt(((pts[:, None, :, :] - centres[:, :, None, :]) ** 2).sum(axis=3).max(axis=2))
-        cnt = self.outside.query_ball_point(centres.reshape(-1, 3), r.ravel(), return_length=True).reshape(r.shape)
+        flat_c, flat_r = centres.reshape(-1, 3), r.ravel()
+        cnt = self.near.query_ball_point(flat_c, flat_r, return_length=True).reshape(r.shape)
+        cnt = cnt + 8 * self.far.query_ball_point(flat_c, flat_r, return_length=True).reshape(r.shape)
         # Ties (e.g. no outside voxel at all) go to the smaller sphere.
         return cnt + r / (100 * r.max()), r
 
