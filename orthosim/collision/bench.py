@@ -57,8 +57,11 @@ def collision_timings(dentition, poses: Mapping[int, np.ndarray] | None = None, 
     """{"collision_us_per_step": {circles, discrete, continuous, fcl_boolean, fcl_all_contacts},
     "candidate_pairs": int, "collision_step": {...details}} for one whole-arch step.
 
-    poses: FDI -> (4, 4) (rest poses by default); the discrete detectors and FCL test these.
-    poses_end: the continuous detector sweeps poses -> poses_end (default `perturbed_poses(poses)`).
+    The step goes from `poses` (FDI -> (4, 4), rest poses by default) to `poses_end` (default
+    `perturbed_poses(poses)`: every tooth moved 0.1 mm and turned 0.2 degrees). The discrete
+    detectors and FCL test the step's end poses, as a simulator using them would; the continuous
+    detector sweeps the whole step. `collision_step.at_start_poses_us` also gives the discrete
+    detector and FCL at the start poses (the parametric model at rest: crowns just touching).
     """
     if model is None:
         model = CollisionModel.from_dentition(dentition, tree_builder=tree_builder)
@@ -67,11 +70,15 @@ def collision_timings(dentition, poses: Mapping[int, np.ndarray] | None = None, 
     poses_end = poses_end if step_given else perturbed_poses(poses)
     pairs = list(pairs) if pairs is not None else default_pairs(model)
     all_pairs = CollisionRequest(all_leaf_pairs=True)
-    P = model.pose_array(poses)
     pair_idx = model.pair_indices(pairs)
-    objs = [(model.fcl_object(a), model.fcl_object(b), P[a], P[b]) for a, b in pair_idx]
 
-    def fcl_step(all_contacts: bool):
+    def fcl_objects(poses_):
+        P = model.pose_array(poses_)
+        return [(model.fcl_object(a), model.fcl_object(b), P[a], P[b]) for a, b in pair_idx]
+
+    at_end, at_start = fcl_objects(poses_end), fcl_objects(poses)
+
+    def fcl_step(all_contacts: bool, objs=at_end):
         req = fcl.CollisionRequest(num_max_contacts=10**7, enable_contact=True) if all_contacts else fcl.CollisionRequest()
         hits = 0
         for oa, ob, Ta, Tb in objs:
@@ -82,14 +89,17 @@ def collision_timings(dentition, poses: Mapping[int, np.ndarray] | None = None, 
             hits += res.is_collision
         return hits
 
-    us = median_us({
-        "circles": lambda: detect_step(model, poses, pairs=pairs, detector="circles"),
-        "discrete": lambda: detect_step(model, poses, pairs=pairs, detector="discrete", request=all_pairs),
+    timed = median_us({
+        "circles": lambda: detect_step(model, poses_end, pairs=pairs, detector="circles"),
+        "discrete": lambda: detect_step(model, poses_end, pairs=pairs, detector="discrete", request=all_pairs),
         "continuous": lambda: detect_step(model, poses, poses_end, pairs=pairs, detector="continuous", request=all_pairs),
         "fcl_boolean": lambda: fcl_step(False),
         "fcl_all_contacts": lambda: fcl_step(True),
+        "discrete_at_start": lambda: detect_step(model, poses, pairs=pairs, detector="discrete", request=all_pairs),
+        "fcl_boolean_at_start": lambda: fcl_step(False, at_start),
     }, repeats)
-    disc = detect_step(model, poses, pairs=pairs, detector="discrete", request=all_pairs)
+    us = {k: timed[k] for k in ("circles", "discrete", "continuous", "fcl_boolean", "fcl_all_contacts")}
+    disc = detect_step(model, poses_end, pairs=pairs, detector="discrete", request=all_pairs)
     cont = detect_step(model, poses, poses_end, pairs=pairs, detector="continuous", request=all_pairs)
     return {
         "collision_us_per_step": us,
@@ -102,6 +112,8 @@ def collision_timings(dentition, poses: Mapping[int, np.ndarray] | None = None, 
             "discrete_overlapping_leaf_pairs": int(len(disc.leaf_pairs)),
             "continuous_touching_pairs": int(cont.touching.sum()),
             "fcl_intersecting_pairs": int(fcl_step(False)),
+            "at_start_poses_us": {"discrete": timed["discrete_at_start"], "fcl_boolean": timed["fcl_boolean_at_start"],
+                                  "fcl_intersecting_pairs": int(fcl_step(False, at_start))},
             "continuous_step": "every tooth moved 0.1 mm and turned 0.2 degrees (perturbed_poses)" if not step_given else "given",
             "ratios": {
                 "discrete_over_fcl_boolean": us["discrete"] / us["fcl_boolean"],

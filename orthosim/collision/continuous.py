@@ -54,9 +54,12 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
         s = Rs[na] + Rs[nb]
         return dx * dx + dy * dy + dz * dz <= s * s
 
+    x0, y0, z0 = W0T
+    dx, dy, dz = DT
+
     def at_leaves(pair, na, nb):
-        ax, ay, az = W0T[:, na] - W0T[:, nb]
-        bx, by, bz = DT[:, na] - DT[:, nb]
+        ax, ay, az = x0[na] - x0[nb], y0[na] - y0[nb], z0[na] - z0[nb]
+        bx, by, bz = dx[na] - dx[nb], dy[na] - dy[nb], dz[na] - dz[nb]
         rr = R[na] + R[nb]
         enter, leave = contact_interval_from_dots(ax * ax + ay * ay + az * az, ax * bx + ay * by + az * bz,
                                                   bx * bx + by * by + bz * bz, rr * rr)

@@ -19,27 +19,62 @@ Inflating a sphere of centre x by that bound makes the chord test conservative.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 
 def rotation_vector(T0: np.ndarray, T1: np.ndarray) -> np.ndarray:
-    """(..., 3) rotation vector (radians, arch frame) of R1 R0^T, angle in [0, pi]. T: (..., 4, 4)."""
+    """(..., 3) rotation vector (radians, arch frame) of R1 R0^T, angle in [0, pi]. T: (..., 4, 4).
+
+    Within 1e-6 rad of a half turn, where the axis's sign is not fixed by the matrix, the axis is
+    taken from the largest column of R + I, oriented to a non-negative largest component: any
+    fixed choice is valid as long as the detector and its ground truth share it (both call this).
+    """
     T0 = np.asarray(T0, float)
     T1 = np.asarray(T1, float)
     R = np.einsum("...ij,...kj->...ik", T1[..., :3, :3], T0[..., :3, :3])
-    shape = R.shape[:-2]
-    return Rotation.from_matrix(R.reshape(-1, 3, 3)).as_rotvec().reshape(*shape, 3)
+    theta = rotation_angle(T0, T1)
+    skew = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], axis=-1)
+    sin = np.sin(theta)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(theta < 1e-8, 0.5, theta / (2.0 * sin))
+    w = skew * scale[..., None]
+    near_pi = np.pi - theta < 1e-6
+    if np.any(near_pi):
+        S = R[near_pi] + np.eye(3)
+        cols = np.linalg.norm(S, axis=-2)  # norms of the columns
+        k = np.argmax(cols, axis=-1)
+        axis = np.take_along_axis(S, k[:, None, None], axis=-1)[..., 0] / cols[np.arange(len(k)), k][:, None]
+        big = np.take_along_axis(axis, np.argmax(np.abs(axis), axis=-1)[:, None], axis=-1)
+        axis = axis * np.where(big < 0, -1.0, 1.0)
+        w[near_pi] = axis * theta[near_pi][:, None]
+    return w
+
+
+def rotation_matrix(w: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotation of each rotation vector w (..., 3) (radians), by Rodrigues' formula."""
+    w = np.asarray(w, float)
+    theta = np.linalg.norm(w, axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = np.where(theta[..., None] > 1e-12, w / theta[..., None], 0.0)
+    K = np.zeros(w.shape[:-1] + (3, 3))
+    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -k[..., 2], k[..., 1], -k[..., 0]
+    K[..., 1, 0], K[..., 2, 0], K[..., 2, 1] = k[..., 2], -k[..., 1], k[..., 0]
+    s, c = np.sin(theta)[..., None, None], np.cos(theta)[..., None, None]
+    return np.eye(3) + s * K + (1 - c) * (K @ K)
 
 
 def rotation_angle(T0: np.ndarray, T1: np.ndarray) -> np.ndarray:
     """(...,) radians turned between the two poses, in [0, pi].
 
-    From |R1 - R0|_F = 2 sqrt(2) sin(theta / 2), which stays accurate for tiny turns (unlike the
-    trace formula) and needs no matrix logarithm.
+    atan2(|skew part| / 2, (trace - 1) / 2) of R1 R0^T: accurate for tiny turns and near half a
+    turn alike (acos or asin alone lose half the digits at one end).
     """
-    D = np.asarray(T1, float)[..., :3, :3] - np.asarray(T0, float)[..., :3, :3]
-    s = np.sqrt(np.einsum("...ij,...ij->...", D, D)) / (2.0 * np.sqrt(2.0))
-    return 2.0 * np.arcsin(np.minimum(s, 1.0))
+    T0 = np.asarray(T0, float)
+    T1 = np.asarray(T1, float)
+    R = np.einsum("...ij,...kj->...ik", T1[..., :3, :3], T0[..., :3, :3])
+    sx, sy, sz = R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]
+    sin2 = np.sqrt(sx * sx + sy * sy + sz * sz)
+    cos2 = R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2] - 1.0
+    return np.arctan2(sin2, cos2)
 
 
 def interpolate_pose(T0: np.ndarray, T1: np.ndarray, t: float | np.ndarray) -> np.ndarray:
@@ -48,7 +83,7 @@ def interpolate_pose(T0: np.ndarray, T1: np.ndarray, t: float | np.ndarray) -> n
     T1 = np.asarray(T1, float)
     ts = np.atleast_1d(np.asarray(t, float))
     w = rotation_vector(T0, T1)
-    R = Rotation.from_rotvec(ts[:, None] * w[None, :]).as_matrix() @ T0[:3, :3]
+    R = rotation_matrix(ts[:, None] * w[None, :]) @ T0[:3, :3]
     out = np.tile(np.eye(4), (len(ts), 1, 1))
     out[:, :3, :3] = R
     out[:, :3, 3] = T0[:3, 3] + ts[:, None] * (T1[:3, 3] - T0[:3, 3])
@@ -78,6 +113,6 @@ def interpolate_poses(T0: np.ndarray, T1: np.ndarray, t: np.ndarray) -> np.ndarr
     t = np.asarray(t, float)
     w = rotation_vector(T0, T1)
     out = np.tile(np.eye(4), (len(t), 1, 1))
-    out[:, :3, :3] = Rotation.from_rotvec(t[:, None] * w).as_matrix() @ T0[:, :3, :3]
+    out[:, :3, :3] = rotation_matrix(t[:, None] * w) @ T0[:, :3, :3]
     out[:, :3, 3] = T0[:, :3, 3] + t[:, None] * (T1[:, :3, 3] - T0[:, :3, 3])
     return out
