@@ -22,7 +22,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -202,6 +202,53 @@ class FrameSink:
         self._stack.__exit__(RuntimeError, RuntimeError("aborted"), None)
 
 
+def prefetch(items: Iterable, depth: int = 2) -> Iterator:
+    """Yield the items of `items`, produced on a background thread up to `depth` ahead.
+
+    Why: a frame's simulation step and the previous frame's drawing and encoding do not depend on
+    each other, and much of both runs outside the GIL (numpy, llvmpipe's raster threads, zlib,
+    the ffmpeg process); producing the next state while this one is drawn makes the run as slow as
+    the slower stage instead of the sum of both. Errors raised by the producer surface here.
+    """
+    q: queue.Queue = queue.Queue(maxsize=max(1, depth))
+    stop = threading.Event()
+    failure: list[BaseException] = []
+
+    def produce():
+        try:
+            for item in items:
+                while not stop.is_set():
+                    try:
+                        q.put(item, timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+        except BaseException as exc:  # handed to the consumer
+            failure.append(exc)
+        while not stop.is_set():
+            try:
+                q.put(_END, timeout=0.1)
+                return
+            except queue.Full:
+                continue
+
+    worker = threading.Thread(target=produce, name="prefetch", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item = q.get()
+            if item is _END:
+                if failure:
+                    raise failure[0]
+                return
+            yield item
+    finally:
+        stop.set()
+        worker.join(timeout=5)
+
+
 class _Progress:
     """tqdm bar shown only on a terminal and only once the run has lasted a second."""
 
@@ -244,7 +291,7 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
     try:
         with Renderer(size, alpha=alpha) as renderer:
             started = time.perf_counter()
-            for state in frames:
+            for state in prefetch(frames):
                 t0 = time.perf_counter()
                 scene.update(state)
                 images = [renderer.render(scene, v) for v in views]

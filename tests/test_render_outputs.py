@@ -99,3 +99,19 @@ def test_synthetic_motion_moves_only_the_moving_teeth(dentition):
     state = motion(30)
     moved = {f for f in dentition.fdis if not np.allclose(state.poses[f], rest[f])}
     assert moved == set(motion.moving) and state.n_contacts == 20
+
+
+def test_prefetch_keeps_order_and_surfaces_producer_errors():
+    from render.animation import prefetch
+
+    assert list(prefetch(iter(range(50)))) == list(range(50))
+
+    def failing():
+        yield 1
+        raise OrthosimError("case.toml", "loads", "broken")
+
+    got = []
+    with pytest.raises(OrthosimError, match="broken"):
+        for x in prefetch(failing()):
+            got.append(x)
+    assert got == [1]
