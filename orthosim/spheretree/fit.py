@@ -48,6 +48,7 @@ class FitOptions:
     depths: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0)  # x patch radius
     search_rounds: int = 8
     reassign_rounds: int = 3
+    refit_rounds: int = 8  # pattern-search rounds after each reassignment
     seed: int = 0
 
 
@@ -284,20 +285,28 @@ class _LeafFitter:
         # Ties (e.g. no outside voxel at all) go to the smaller sphere.
         return cnt + r / (100 * r.max()), r
 
-    def search(self, pts: np.ndarray, c: np.ndarray, step: np.ndarray) -> np.ndarray:
-        """Pattern search on the centres (L, 3) mm from `step` (L,) mm: move while the score drops."""
-        rows = np.arange(len(c))
+    def search(self, pts: np.ndarray, c: np.ndarray, step: np.ndarray, rounds: int | None = None) -> np.ndarray:
+        """Pattern search on the centres (L, 3) mm from `step` (L,) mm: move while the score drops.
+
+        Steps go below the voxel size on purpose: among centres that hold as many outside voxels,
+        the score prefers the smaller sphere, which tiny moves still find.
+        """
+        c = c.copy()
         best_s = self.score(pts, c[:, None, :])[0][:, 0]
         dirs = np.concatenate([np.eye(3), -np.eye(3)])
-        for _ in range(self.options.search_rounds):
-            cand = c[:, None, :] + step[:, None, None] * dirs[None, :, :]
-            s, _ = self.score(pts, cand)
+        for _ in range(self.options.search_rounds if rounds is None else rounds):
+            act = np.flatnonzero(step > 1e-3 * self.voxel)
+            if not len(act):
+                break
+            cand = c[act, None, :] + step[act, None, None] * dirs[None, :, :]
+            s, _ = self.score(pts[act], cand)
             j = s.argmin(axis=1)
-            sj = s[rows, j]
-            improved = sj < best_s
-            c[improved] = cand[improved, j[improved]]
-            best_s[improved] = sj[improved]
-            step = np.where(improved, step, 0.5 * step)
+            sj = s[np.arange(len(act)), j]
+            improved = sj < best_s[act]
+            moved = act[improved]
+            c[moved] = cand[improved, j[improved]]
+            best_s[moved] = sj[improved]
+            step[act[~improved]] *= 0.5
         return c
 
     def fit(self, leaf_of_face: np.ndarray, n_leaves: int) -> tuple[np.ndarray, np.ndarray]:
@@ -346,7 +355,7 @@ def fit_leaves(
         empty = groups[:, 0] < 0
         pts[empty] = c[empty][:, None, :]
         r = radii_to_cover(pts, c)
-        c = fitter.search(pts, c, 0.1 * r)
+        c = fitter.search(pts, c, 0.1 * r, options.refit_rounds)
         r = radii_to_cover(pts, c)
     return c, r, leaf_of_face
 

@@ -1,0 +1,65 @@
+"""`orthosim spheretree build|eval` from the command line: the files and figures users rely on."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+from click.testing import CliRunner
+
+from orthosim.errors import SphereTreeError
+from orthosim.spheretree import read_sph
+from orthosim.spheretree.commands import spheretree
+
+
+@pytest.fixture()
+def mesh_folder(tmp_path):
+    folder = tmp_path / "teeth"
+    folder.mkdir()
+    # Tooth-sized closed shapes named by FDI number (a capsule ~ a single-rooted tooth).
+    trimesh.creation.capsule(height=14.0, radius=3.0, count=[16, 16]).export(folder / "tooth_11.stl")
+    trimesh.creation.capsule(height=12.0, radius=3.5, count=[16, 16]).export(folder / "tooth_21.stl")
+    return folder
+
+
+def test_build_writes_one_sph_per_tooth_named_by_fdi(tmp_path, mesh_folder, monkeypatch):
+    monkeypatch.setenv("ORTHOSIM_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "trees"
+    res = CliRunner().invoke(spheretree, ["build", str(mesh_folder), "--method", "octree", "--depth", "4", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in out.iterdir()) == ["11.sph", "21.sph"]
+    mesh = trimesh.load(mesh_folder / "tooth_11.stl")
+    tree = read_sph(out / "11.sph", mesh.vertices, mesh.faces)
+    assert tree.depth == 4 and tree.branching == 8
+    tree.validate(mesh.vertices, mesh.faces)
+    assert any((tmp_path / "cache").glob("*.npz"))  # built through the cache
+
+
+def test_eval_json_has_the_contract_fields(tmp_path, mesh_folder):
+    out = tmp_path / "eval.json"
+    res = CliRunner().invoke(spheretree, ["eval", str(mesh_folder), "--method", "fit", "--depth", "3",
+                                          "--samples", "20000", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    data = json.loads(out.read_text())
+    assert [t["fdi"] for t in data["teeth"]] == [11, 21]
+    for t in data["teeth"]:
+        assert {"fdi", "leaves", "sov_sum", "sov_union", "surface_coverage", "build_s"} <= set(t)
+        assert t["surface_coverage"] == 1.0 and t["surface_samples"] >= 100_000
+        assert 0 < t["sov_union"] <= t["sov_sum"] + 3 * t["sov_sum_stderr"]
+    s = data["summary"]
+    assert {"sov_sum_mean", "sov_sum_min", "sov_sum_max", "sov_union_mean", "surface_coverage_min"} <= set(s)
+    assert s["sov_sum_min"] <= s["sov_sum_mean"] <= s["sov_sum_max"]
+    assert np.isclose(s["sov_sum_mean"], np.mean([t["sov_sum"] for t in data["teeth"]]))
+
+
+@pytest.mark.parametrize("args,text", [
+    (["build", "{missing}", "--out", "{out}"], "not found"),
+    (["build", "{folder}", "--method", "octree", "--branch", "4", "--out", "{out}"], "branch"),
+    (["eval", "{folder}", "--surface-samples", "1000", "--out", "{out}/e.json"], "surface-samples"),
+])
+def test_user_errors_are_sphere_tree_errors(tmp_path, mesh_folder, args, text):
+    args = [a.format(missing=tmp_path / "nope", out=tmp_path / "o", folder=mesh_folder) for a in args]
+    with pytest.raises(SphereTreeError, match=text):
+        spheretree.main(args, standalone_mode=False)
