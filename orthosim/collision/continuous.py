@@ -40,12 +40,13 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
     bound like the paper's interval arithmetic, tested on float32 arrays as in `discrete`. Leaf
     pairs that pass get the exact closed-form test and Eq. 2 in float64.
     """
-    W0T = model.world_centers(poses0) if world0 is None else world0  # (3, N)
-    DT = model.world_centers(poses1) - W0T  # chord of every node centre
-    inflate = np.repeat(chord_deviation_bound(rotation_angle(poses0, poses1), 1.0), model.width)
+    W0 = model.world_centers(poses0) if world0 is None else world0  # [body][axis][j]
+    D = model.world_centers(poses1) - W0  # chord of every node centre
+    inflate = np.repeat(chord_deviation_bound(rotation_angle(poses0, poses1), 1.0), model.stride)
     R = model.radii + inflate * model.rho  # radius grown by the node centre's largest chord deviation
-    X, Y, Z = (W0T + 0.5 * DT).astype(np.float32)
-    Rs = (R + 0.5 * np.sqrt((DT * DT).sum(axis=0)) + FLOAT32_MARGIN_MM).astype(np.float32)
+    X, Y, Z = model.axes((W0 + 0.5 * D).astype(np.float32))
+    chord = np.sqrt(np.einsum("naj,naj->nj", *(2 * [D.reshape(len(model.bodies), 3, model.width)])))
+    Rs = (R + 0.5 * model.node_values(chord) + FLOAT32_MARGIN_MM).astype(np.float32)
 
     def may_touch(pair, na, nb):
         dx = X[na] - X[nb]
@@ -54,8 +55,8 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
         s = Rs[na] + Rs[nb]
         return dx * dx + dy * dy + dz * dz <= s * s
 
-    x0, y0, z0 = W0T
-    dx, dy, dz = DT
+    x0, y0, z0 = model.axes(W0)
+    dx, dy, dz = model.axes(D)
 
     def at_leaves(pair, na, nb):
         ax, ay, az = x0[na] - x0[nb], y0[na] - y0[nb], z0[na] - z0[nb]
@@ -81,7 +82,7 @@ def swept_leaves_posed(model: CollisionModel, pair_idx: np.ndarray, Ta0, Ta1, Tb
     M_b1 = inv_a0 @ Tb1
     wa = chord_deviation_bound(rotation_angle(Ta0, Ta1), 1.0)  # mm of deviation per mm of |centre|
     wb = chord_deviation_bound(rotation_angle(Tb0, Tb1), 1.0)
-    C = model.centers.reshape(-1, 3)
+    C = model.centers_flat
 
     def chords(pair, na, nb):
         ca, cb = C[na], C[nb]

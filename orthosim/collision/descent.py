@@ -53,7 +53,7 @@ def descend(model: CollisionModel, pair_idx: np.ndarray, may_touch: Callable, at
         lookup[pair_idx[:, 0] * n + pair_idx[:, 1]] = np.arange(p)
 
     def pair_of(na, nb):
-        return pair if track_pair else lookup[(na // model.width) * len(model.bodies) + nb // model.width]
+        return pair if track_pair else lookup[(na // model.stride) * n + nb // model.stride]
 
     found = np.zeros(p, bool)
     out_pair, out_a, out_b, payloads = [], [], [], []

@@ -30,7 +30,7 @@ def default_pairs(model: CollisionModel, poses: np.ndarray | None = None, absent
     if all(fdi_mod.is_fdi(k) for k in keys):
         return candidate_pairs(keys, absent)
     P = np.stack([b.rest_pose for b in model.bodies]) if poses is None else poses
-    c = model.world_centers(P)[:, model.roots(np.arange(len(keys)))].T
+    c = model.xyz(model.world_centers(P), model.roots(np.arange(len(keys))))
     idx = sweep_and_prune(c, model.radii[model.roots(np.arange(len(keys)))])
     return [(keys[i], keys[j]) for i, j in idx]
 
@@ -103,11 +103,11 @@ def _leaf_arrays(model, pair_idx, pair, la, lb, Pa, Pb, per_pair=False, W=None):
     tooth pair (per_pair) when each pair is drawn at its own time; W: world centres if known."""
     ia, ib = pair_idx[pair, 0], pair_idx[pair, 1]
     if W is not None:
-        ca, cb = np.ascontiguousarray(W[:, la].T), np.ascontiguousarray(W[:, lb].T)
+        ca, cb = model.xyz(W, la), model.xyz(W, lb)
     else:
         A = Pa[pair] if per_pair else Pa[ia]
         B = Pb[pair] if per_pair else Pb[ib]
-        C = model.centers.reshape(-1, 3)
+        C = model.centers_flat
         ca = np.einsum("mij,mj->mi", A[:, :3, :3], C[la]) + A[:, :3, 3]
         cb = np.einsum("mij,mj->mi", B[:, :3, :3], C[lb]) + B[:, :3, 3]
     return dict(

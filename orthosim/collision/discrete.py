@@ -23,7 +23,7 @@ def overlapping_leaves(model: CollisionModel, poses: np.ndarray, pair_idx: np.nd
     poses: (n, 4, 4) local -> arch frame in model body order; pair_idx: (p, 2) body indices;
     world: `model.world_centers(poses)` when the caller has it already.
     """
-    X, Y, Z = (model.world_centers(poses) if world is None else world).astype(np.float32)
+    X, Y, Z = model.axes((model.world_centers(poses) if world is None else world).astype(np.float32))
     r = model.radii32
 
     def may_touch(pair, na, nb):
@@ -44,7 +44,7 @@ def overlapping_leaves_posed(model: CollisionModel, pair_idx: np.ndarray, Ta: np
     Ra_T = np.transpose(Ta[:, :3, :3], (0, 2, 1))
     R_ab = Ra_T @ Tb[:, :3, :3]  # b's local frame -> a's local frame
     t_ab = np.einsum("pij,pj->pi", Ra_T, Tb[:, :3, 3] - Ta[:, :3, 3])
-    C = model.centers.reshape(-1, 3)
+    C = model.centers_flat
     r = model.radii
 
     def may_touch(pair, na, nb):

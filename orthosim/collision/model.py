@@ -37,16 +37,18 @@ class Body:
 class CollisionModel:
     """Sphere trees, bounding circles and exact meshes of every body, built once.
 
-    The trees are flattened body-major into padded arrays, so one batched matrix product places
-    every node of every tooth: node `f = body * width + j`, j the node's position in its own tree
-    counted level by level from the root (root j = 0, leaves last). Padding slots are never
-    reached by a descent.
-      centers (n_bodies, width, 3) mm, local frame of the body;
-      radii, rho (n_bodies * width,) mm: radius, and |centre| (distance from the local origin,
-        for the rotation bound);
-      child_start, child_count (n_bodies * width,): flat index range of a node's children
-        (count 0 at leaves);
-      leaf_index (n_bodies * width,): index of a leaf in its tree's leaf level, -1 for inner nodes.
+    The trees are flattened body-major into padded arrays so that one batched matrix product
+    places every node of every tooth, and the placed coordinates need no transposing: body i owns
+    the flat slots [i * stride, i * stride + width), stride = 3 * width, node `f = i * stride + j`
+    with j the node's position in its own tree counted level by level from the root (root j = 0,
+    leaves last). World coordinates (`world_centers`) are laid out [body][axis][j], so the x, y, z
+    of node f sit at f, f + width, f + 2 width of one flat array: three views of it
+    (`axes`) gather like contiguous per-axis arrays. Unused slots are never reached.
+      centers (n_bodies, width, 3) mm, local frame of the body; centers_flat (n * stride, 3);
+      radii, rho (n * stride,) mm: radius, and |centre| (distance from the local origin, for the
+        rotation bound);
+      child_start, child_count (n * stride,): flat index range of a node's children (0 at leaves);
+      leaf_index (n * stride,): index of a leaf in its tree's leaf level, -1 for inner nodes.
     """
 
     bodies: list[Body]
@@ -57,6 +59,7 @@ class CollisionModel:
     child_count: np.ndarray = field(init=False)
     leaf_index: np.ndarray = field(init=False)
     width: int = field(init=False)
+    stride: int = field(init=False)
     index: dict[int, int] = field(init=False)
 
     def __post_init__(self):
@@ -65,17 +68,21 @@ class CollisionModel:
         self.index = {b.key: i for i, b in enumerate(self.bodies)}
         sizes = [sum(len(r) for r in b.tree.radii) for b in self.bodies]
         n, w = len(self.bodies), max(sizes)
-        self.width = w
+        self.width, self.stride = w, 3 * w
+        N = n * self.stride
         self.centers = np.zeros((n, w, 3))
-        self.radii = np.zeros(n * w)
-        self.child_start = np.zeros(n * w, np.int64)
-        self.child_count = np.zeros(n * w, np.int64)
-        self.leaf_index = np.full(n * w, -1, np.int64)
+        self.centers_flat = np.zeros((N, 3))
+        self.radii = np.zeros(N)
+        self.child_start = np.zeros(N, np.int64)
+        self.child_count = np.zeros(N, np.int64)
+        self.leaf_index = np.full(N, -1, np.int64)
         for i, b in enumerate(self.bodies):
             tree = b.tree
             level_start = np.concatenate([[0], np.cumsum([len(r) for r in tree.radii])])
-            base = i * w
-            self.centers[i, : sizes[i]] = np.concatenate(tree.centers)
+            base = i * self.stride
+            c = np.concatenate(tree.centers)
+            self.centers[i, : sizes[i]] = c
+            self.centers_flat[base : base + sizes[i]] = c
             self.radii[base : base + sizes[i]] = np.concatenate(tree.radii)
             for k in range(tree.depth - 1):
                 off = tree.child_offsets(k + 1)
@@ -83,8 +90,8 @@ class CollisionModel:
                 self.child_start[sl] = base + level_start[k + 1] + off[:-1]
                 self.child_count[sl] = np.diff(off)
             self.leaf_index[base + level_start[-2] : base + level_start[-1]] = np.arange(tree.n_leaves)
-        self.rho = np.linalg.norm(self.centers, axis=2).reshape(-1)
-        self._centers_by_axis = np.ascontiguousarray(np.moveaxis(self.centers, 2, 0))  # (3, n, width)
+        self.rho = np.linalg.norm(self.centers_flat, axis=1)
+        self._centers_T = np.ascontiguousarray(np.transpose(self.centers, (0, 2, 1)))  # (n, 3, width)
         self.radii32 = (self.radii + FLOAT32_MARGIN_MM).astype(np.float32)
         # what the descent compares to choose which node to split: the radius, -1 for leaves
         self.split_key = np.where(self.child_count > 0, self.radii, -1.0).astype(np.float32)
@@ -94,17 +101,33 @@ class CollisionModel:
 
     def roots(self, body_idx: np.ndarray) -> np.ndarray:
         """Flat node index of the root of each body."""
-        return np.asarray(body_idx, np.int64) * self.width
+        return np.asarray(body_idx, np.int64) * self.stride
+
+    def body_of(self, nodes: np.ndarray) -> np.ndarray:
+        return nodes // self.stride
 
     def world_centers(self, poses: np.ndarray) -> np.ndarray:
-        """(3, n_bodies * width) mm: every node centre in the arch frame under poses (n, 4, 4),
-        one row per axis (the descent gathers from contiguous rows)."""
-        c = self._centers_by_axis
-        R, p = poses[:, :3, :3], poses[:, :3, 3]
-        out = np.empty((3,) + c.shape[1:])
-        for i in range(3):  # nine (n, width) multiply-adds: far faster than a batched 3x3 matmul
-            out[i] = c[0] * R[:, i, 0, None] + c[1] * R[:, i, 1, None] + c[2] * R[:, i, 2, None] + p[:, i, None]
-        return out.reshape(3, -1)
+        """(n_bodies * stride,) mm: every node centre in the arch frame under poses (n, 4, 4), laid
+        out [body][axis][j] (see the class docstring; `axes` and `xyz` read it)."""
+        out = np.matmul(poses[:, :3, :3], self._centers_T)
+        out += poses[:, :3, 3, None]
+        return out.reshape(-1)
+
+    def axes(self, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """x, y, z views of a [body][axis][j] flat array, each indexed by flat node index."""
+        w = self.width
+        return flat, flat[w:], flat[2 * w :]
+
+    def xyz(self, flat: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+        """(m, 3) coordinates of the given flat nodes from a [body][axis][j] flat array."""
+        x, y, z = self.axes(flat)
+        return np.stack([x[nodes], y[nodes], z[nodes]], axis=1)
+
+    def node_values(self, per_node: np.ndarray) -> np.ndarray:
+        """(n * stride,) flat array of an (n, width) per-node quantity (zeros in unused slots)."""
+        out = np.zeros((len(self.bodies), self.stride))
+        out[:, : self.width] = per_node
+        return out.reshape(-1)
 
     @property
     def depth(self) -> int:
