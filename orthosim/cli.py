@@ -168,6 +168,10 @@ from .collision.commands import collide  # noqa: E402  (issue 5: orthosim collid
 
 main.add_command(collide)
 
+from .spheretree.commands import spheretree  # noqa: E402  (issue 3: orthosim spheretree build|eval)
+
+main.add_command(spheretree)
+
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """Repairs and other warnings reach the user as `orthosim: warning: ...`, one line each."""
