@@ -63,8 +63,8 @@ def test_propagation_stops_where_the_force_no_longer_moves_a_tooth():
 @pytest.mark.parametrize("share", [0.5, 0.7])
 def test_a_molar_pushing_two_touching_teeth_moves_the_free_end_at_the_rate_of_its_share(tmp_path, share):
     """Upper right 17-16-15 touch; 14 is out, so 15 has room. 400 cN on 17 toward 16: 16 receives
-    share x 400, 15 receives share x that (less the arch's turn), and 15 moves at the rate of what
-    it receives; 16 and 17, blocked, follow it."""
+    share x 400, 15 receives share x that, and 15 moves at the rate of what it receives into the
+    space, toward the canine; 16 and 17, blocked, follow it."""
     from collision_helpers import median_split_tree
     from orthosim.case import load_case
     from orthosim.collision import CollisionModel
@@ -93,13 +93,16 @@ movement = "translation"
     dent = parametric_dentition("coarse")
     model = MovementModel.build(case, dent, CollisionModel.from_dentition(dent, tree_builder=median_split_tree))
     recs = list(simulate(model, "continuous"))
-    c = {n: dent.teeth[n].to_world(dent.teeth[n].crown_center) for n in (17, 16, 15)}
-    n1 = (c[16] - c[17]) * [1, 0, 1]
-    n2 = (c[15] - c[16]) * [1, 0, 1]
-    n1, n2 = n1 / np.linalg.norm(n1), n2 / np.linalg.norm(n2)
+    c = {n: dent.teeth[n].to_world(dent.teeth[n].crown_center) for n in (17, 16, 15, 13)}
+
+    def toward(a, b):  # the paper's director vector, in the occlusal plane
+        v = (c[b] - c[a]) * [1, 0, 1]
+        return v / np.linalg.norm(v)
+
     f = recs[1].forces
-    assert np.allclose(f.received[16], share * 400 * n1, atol=1e-6)
-    assert np.allclose(f.received[15], share * (share * 400 * (n1 @ n2)) * n2, atol=1e-6)
+    # each pushed tooth receives the share of the push, along the arch toward its own next tooth
+    assert np.allclose(f.received[16], share * 400 * toward(16, 15), atol=1e-6)
+    assert np.allclose(f.received[15], share * share * 400 * toward(15, 13), atol=1e-6)
     assert set(f.blocked_by) >= {16, 17} and 15 not in f.blocked_by
     rate = RateLaw().rate(np.linalg.norm(f.received[15]), model.mechanics[15].root_area_mm2)
     step1 = recs[1].poses[15][:3, 3] - recs[0].poses[15][:3, 3]

@@ -4,7 +4,9 @@ For every pair of touching teeth (i, j), n_ij is the unit vector from i toward j
 centres in the occlusal (x-z) plane for neighbours along an arch, and vertical for upper-versus-lower
 (occlusal) contacts, which only stop and pass on vertical movement. When the force on i pushes into
 j (F_i . n_ij > 0), j receives the share s of that component along n_ij and i is blocked in that
-direction. What j receives adds to its own force and may be passed on again, down the arch, while
+direction. The force j receives points along the arch, from j toward its own next tooth (the
+paper's director vector: the pushed tooth moves toward its next tooth, as a loaded one does); for
+occlusal contacts it stays vertical. What j receives adds to its own force and may be passed on again, down the arch, while
 the force on the passing tooth is still enough to move it (above the rate law's threshold). The
 fixed point is found by iteration; it exists because s < 1 (forces decay geometrically along a
 chain). Two chains pushing toward each other meet with opposite forces and block each other, which
@@ -40,12 +42,15 @@ class ForceBalance:
 
 
 def propagate(applied: Mapping[int, np.ndarray], contacts: Sequence[tuple[int, int, np.ndarray]], share: float,
-              can_pass: Callable[[int, float], bool], iterations: int = 200, tol_cN: float = 1e-6) -> ForceBalance:
+              can_pass: Callable[[int, float], bool], onward: Mapping[tuple[int, int], np.ndarray] | None = None,
+              iterations: int = 200, tol_cN: float = 1e-6) -> ForceBalance:
     """Pass forces through touching teeth to a fixed point (see the module text).
 
     applied: FDI -> (3,) cN. contacts: (i, j, n_ij) for each touching pair, n_ij (3,) unit from i to j
     (the pair need not be listed both ways). share: fraction (0..1) of the pushing component passed
     on. can_pass(fdi, |F| cN): whether a tooth under this force passes any of it on.
+    onward: (i, j) -> (3,) unit direction of the force j receives when i pushes it (the paper's
+    director vector of j toward its own next tooth); n_ij where not given.
     """
     if not 0.0 <= share < 1.0:
         raise ValueError("share must be in [0, 1)")
@@ -65,7 +70,8 @@ def propagate(applied: Mapping[int, np.ndarray], contacts: Sequence[tuple[int, i
         for i, j, n in edges:
             c = float(total[i] @ n)
             if c > 0 and can_pass(i, float(np.linalg.norm(total[i]))):
-                passed[(i, j)] = share * c * n
+                d = n if onward is None else np.asarray(onward.get((i, j), n), float)
+                passed[(i, j)] = share * c * d
                 new[j] += passed[(i, j)]
         delta = max((float(np.abs(new[t] - received[t]).max()) for t in teeth), default=0.0)
         received = new

@@ -254,6 +254,22 @@ def _normal(model: MovementModel, pair: tuple[int, int], centers: Mapping[int, n
     return _horizontal(centers[b] - centers[a])
 
 
+def _onward(model: MovementModel, poses, touching) -> dict[tuple[int, int], np.ndarray]:
+    """(pusher, pushed) -> direction of the force the pushed tooth receives: along the arch, toward
+    its own next tooth away from the pusher (the paper's director vector); occlusal pairs: none
+    (the contact normal, vertical, is used)."""
+    out = {}
+    for a, b in touching:
+        if (a, b) in model.facing or (b, a) in model.facing or F.arch_of(a) != F.arch_of(b):
+            continue
+        order = F.arch_order(F.arch_of(a), set(model.dentition.teeth))
+        ia, ib = order.index(a), order.index(b)
+        for i, j, step in ((a, b, np.sign(ib - ia)), (b, a, np.sign(ia - ib))):
+            way = "mesial" if step == _arch_step(j, "mesial") else "distal"
+            out[(i, j)] = arch_direction(model, poses, j, way)
+    return out
+
+
 def _motions(model: MovementModel, poses, balance: ForceBalance, loads_on: dict, dt: float, centers) -> dict[int, Motion]:
     """Each tooth's motion over the step under its free force; blocked teeth follow a neighbour that gives way."""
     s = model.settings
@@ -427,7 +443,8 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
         applied = {n: sum((f for f, *_ in v), np.zeros(3)) for n, v in loads_on.items()}
         contacts = [(a, b, _normal(model, (a, b), centers)) for a, b in touching]
         balance = propagate(applied, contacts, s.force_share,
-                            lambda n, f: n in model.mechanics and s.rate.moves(f, model.mechanics[n].root_area_mm2))
+                            lambda n, f: n in model.mechanics and s.rate.moves(f, model.mechanics[n].root_area_mm2),
+                            _onward(model, P, touching))
         # 2. motions and intended end poses
         motions = _motions(model, P, balance, loads_on, dt, centers)
         P1 = dict(P)
