@@ -14,6 +14,16 @@ from orthosim.collision.validate import ToothSet, continuous_study, dense_first_
 from orthosim.pose import rotation_about_axis, translation
 
 
+def octree_tree(mesh):
+    """The project's octree builder (fast enough for tests; the "fit" builder takes seconds a tooth)."""
+    from orthosim.spheretree.build import build_sphere_tree
+
+    return build_sphere_tree(mesh, method="octree")
+
+
+BUILDERS = {"median-split(test)": median_split_tree, "octree(project)": octree_tree}
+
+
 @pytest.fixture(scope="module")
 def parametric():
     from orthosim.parametric import parametric_dentition
@@ -35,8 +45,9 @@ def parametric_set(parametric):
 
 # --- the discrete sphere-tree detector -------------------------------------------------------------
 
-def test_discrete_sphere_trees_never_miss_an_intersection_the_exact_mesh_test_finds(parametric):
-    report = discrete_study([parametric_set(parametric)], n_poses=400, tree_builder=median_split_tree, seed=1)
+@pytest.mark.parametrize("builder", BUILDERS)
+def test_discrete_sphere_trees_never_miss_an_intersection_the_exact_mesh_test_finds(parametric, builder):
+    report = discrete_study([parametric_set(parametric)], n_poses=400, tree_builder=BUILDERS[builder], seed=1)
     res = report["sets"]["parametric"]
     assert res["exact_intersecting"] > 100  # the sample really holds intersecting poses
     assert res["false_negatives"] == 0
@@ -102,12 +113,13 @@ def test_first_contact_only_agrees_with_all_leaf_pairs_on_which_teeth_touch(para
 
 # --- the continuous sphere-tree detector ----------------------------------------------------------
 
-def test_continuous_sphere_trees_never_miss_a_contact_that_dense_exact_sampling_finds(parametric):
+@pytest.mark.parametrize("builder", BUILDERS)
+def test_continuous_sphere_trees_never_miss_a_contact_that_dense_exact_sampling_finds(parametric, builder):
     roots = (thin_root_mesh(12.0, 0.35),)
     d, _ = parametric
     sets = [parametric_set(parametric),
             ToothSet("thin_root", roots + (d.teeth[14].mesh, d.teeth[15].mesh), ((0, 1), (0, 2)))]
-    report = continuous_study(sets, n_motions=60, tree_builder=median_split_tree, seed=4, samples=200,
+    report = continuous_study(sets, n_motions=60, tree_builder=BUILDERS[builder], seed=4, samples=200,
                               tunnelling_sets=("thin_root",))
     for name, res in report["sets"].items():
         allk = res["by_kind"]["all"]

@@ -90,6 +90,10 @@ class CollisionModel:
                 self.child_start[sl] = base + level_start[k + 1] + off[:-1]
                 self.child_count[sl] = np.diff(off)
             self.leaf_index[base + level_start[-2] : base + level_start[-1]] = np.arange(tree.n_leaves)
+            # an inner node without children holds no face (faces live in last-level leaves):
+            # it can never hold a contact, so give it a radius no test accepts
+            used = np.arange(base, base + level_start[-2])
+            self.radii[used[self.child_count[used] == 0]] = -1e6
         self.rho = np.linalg.norm(self.centers_flat, axis=1)
         self._centers_T = np.ascontiguousarray(np.transpose(self.centers, (0, 2, 1)))  # (n, 3, width)
         self.radii32 = (self.radii + FLOAT32_MARGIN_MM).astype(np.float32)
