@@ -46,3 +46,9 @@ def test_the_bench_record_times_every_detector_and_fcl_on_the_same_pairs():
     assert all(v > 0 for v in rec["collision_us_per_step"].values())
     assert rec["candidate_pairs"] == len(default_pairs(CollisionModel.from_dentition(d, tree_builder=median_split_tree)))
     assert rec["collision_step"]["discrete_touching_pairs"] >= len(d.adjacent_pairs())  # crowns touch at rest
+
+
+def test_the_generic_broad_phase_keeps_bodies_that_meet_only_during_the_step():
+    model = box_model([10, 0, 0])
+    res = detect_step(model, {2: translation([10, 0, 0])}, {2: translation([-10, 0, 0])}, detector="continuous")
+    assert [tuple(p) for p in res.pairs] == [(1, 2)] and res.touching[0]

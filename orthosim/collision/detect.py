@@ -20,18 +20,25 @@ from .continuous import refine_time_of_contact, swept_leaves
 from .contract import DETECTORS, CollisionError, CollisionRequest, StepResult, empty_leaves
 from .discrete import overlapping_leaves
 from .model import CollisionModel
-from .motion import interpolate_poses
+from .motion import chord_deviation_bound, interpolate_poses, rotation_angle
 
 
-def default_pairs(model: CollisionModel, poses: np.ndarray | None = None, absent: Sequence[int] = ()) -> list[tuple[int, int]]:
+def default_pairs(model: CollisionModel, poses: np.ndarray | None = None, absent: Sequence[int] = (),
+                  poses_end: np.ndarray | None = None) -> list[tuple[int, int]]:
     """The broad phase: arch neighbours and facing teeth when every body is an FDI tooth, else a
-    sweep and prune over the bodies' root spheres at `poses` (rest poses by default)."""
+    sweep and prune over the bodies' root spheres at `poses` (rest poses by default), each grown to
+    hold its whole sweep when `poses_end` is given ((n, 4, 4) arrays in body order)."""
     keys = model.keys
     if all(fdi_mod.is_fdi(k) for k in keys):
         return candidate_pairs(keys, absent)
-    P = np.stack([b.rest_pose for b in model.bodies]) if poses is None else poses
-    c = model.xyz(model.world_centers(P), model.roots(np.arange(len(keys))))
-    idx = sweep_and_prune(c, model.radii[model.roots(np.arange(len(keys)))])
+    P0 = np.stack([b.rest_pose for b in model.bodies]) if poses is None else poses
+    P1 = P0 if poses_end is None else poses_end
+    roots = model.roots(np.arange(len(keys)))
+    c0 = model.xyz(model.world_centers(P0), roots)
+    c1 = model.xyz(model.world_centers(P1), roots)
+    r = (model.radii[roots] + 0.5 * np.linalg.norm(c1 - c0, axis=1)
+         + chord_deviation_bound(rotation_angle(P0, P1), model.rho[roots]))
+    idx = sweep_and_prune(0.5 * (c0 + c1), r)
     return [(keys[i], keys[j]) for i, j in idx]
 
 
@@ -49,7 +56,7 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
     P0 = model.pose_array(poses_start)
     P1 = model.pose_array(poses_end) if poses_end is not None else P0
     if pairs is None:
-        pairs = default_pairs(model, P1)
+        pairs = default_pairs(model, P0, poses_end=P1) if detector == "continuous" else default_pairs(model, P1)
     pairs_arr = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
     pair_idx = model.pair_indices(pairs_arr)
     p = len(pair_idx)
