@@ -32,12 +32,16 @@ def collide() -> None:
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--real-folder", type=click.Path(path_type=Path), default=Path(DEFAULT_REAL), show_default=True,
               help="Open-Full-Jaw maxilla folder; its teeth are studied when it exists.")
-def validate(out_file: Path, poses: int, motions: int, samples: int, seed: int, real_folder: Path) -> None:
+@click.option("--trees", type=click.Choice(["fit", "octree"]), default="fit", show_default=True,
+              help="Sphere-tree builder method (trees are cached on disk).")
+def validate(out_file: Path, poses: int, motions: int, samples: int, seed: int, real_folder: Path, trees: str) -> None:
     """Sphere-tree detectors vs the exact mesh test: misses, false-positive rates, contact times."""
+    from ..spheretree.cache import cached_sphere_tree
     from .validate import run_validation
 
     report = run_validation(out_file, n_poses=poses, n_motions=motions, seed=seed, real_folder=real_folder,
-                            samples=samples)
+                            samples=samples, tree_builder=lambda mesh: cached_sphere_tree(mesh, method=trees),
+                            tree_label=f"orthosim.spheretree cached_sphere_tree(method={trees!r}, 8 x 4 levels)")
     click.echo(json.dumps(_headline(report), indent=1))
     click.echo(f"report written to {out_file}")
 
