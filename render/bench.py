@@ -323,10 +323,14 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
             "render": fps_render >= TARGET_FPS,
             "end_to_end": e2e["fps"] >= TARGET_FPS,
             "end_to_end_60": e2e["fps"] >= E2E_TARGET_FPS,
+            "collision": None if collision is None else {
+                k: (v is not None and 1e6 / v >= TARGET_FPS) for k, v in collision.get("collision_us_per_step", {}).items()},
         },
         "end_to_end": e2e,
         "end_to_end_synthetic": e2e_synthetic,
         "collision_us_per_step": None if collision is None else collision.get("collision_us_per_step"),
+        "collision_fps": None if collision is None else {
+            k: (1e6 / v if v else None) for k, v in collision.get("collision_us_per_step", {}).items()},
         "collision": collision,
         "pending": pending,
         "render_variants": variants,

@@ -22,7 +22,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from orthosim.dentition import Dentition
-from orthosim.fdi import arch_of
+from orthosim.fdi import Arch, arch_of
 from orthosim.tooth import CROWN, ROOT
 
 from .cameras import VIEW_NAMES, CameraView, check_view, frame_view
@@ -47,6 +47,7 @@ LIGHT_RIG = (
     ((0.00, 0.80, -0.60), (1.00, 1.00, 1.00), 0.14),
 )
 ENAMEL_ROUGHNESS = 0.5  # weak specular highlight (see shaders/mesh.frag)
+OCCLUSAL_MARGIN = 1.5  # mm: contacts this close to the occlusal plane show in both occlusal views
 _scene_ids = itertools.count(1)
 
 
@@ -165,6 +166,7 @@ class DentitionScene:
 
         self._views: dict[str, CameraView] = {}
         self._view: CameraView | None = None
+        self._marker_arches = None
         self._extracted: frozenset[int] = frozenset()
         self.state: FrameState | None = None
         self.set_view("frontal")
@@ -201,6 +203,8 @@ class DentitionScene:
         self.camera.aspectRatio = v.aspect
         self.scene.set_pose(self.camera_node, v.pose)
         self._apply_visibility()
+        if self.state is not None and self._marker_arches != self._arch_filter():
+            self._update_markers(self.state.contact_centers, self.state.contact_radii)
         return v
 
     @property
@@ -233,7 +237,20 @@ class DentitionScene:
         if self.color_contact_faces:
             self._paint_contact_faces(state)
 
+    def _arch_filter(self):
+        return None if self._view is None or len(self._view.arches) != 1 else next(iter(self._view.arches))
+
     def _update_markers(self, centers: np.ndarray, radii: np.ndarray) -> None:
+        # An occlusal view shows one arch, seen through where the other arch would be: contacts
+        # between teeth of the hidden arch would float over the shown one. Keep the markers on
+        # the shown arch's side of the occlusal plane (y = 0), with a margin for the contacts
+        # between the arches, which lie on that plane and matter in both views.
+        arch = self._arch_filter()
+        self._marker_arches = arch
+        if arch is not None and len(radii):
+            y = centers[:, 1]
+            keep = y > -OCCLUSAL_MARGIN if arch is Arch.UPPER else y < OCCLUSAL_MARGIN
+            centers, radii = centers[keep], radii[keep]
         n = len(radii) if self.show_markers else 0
         self.marker_mesh.is_visible = n > 0
         if n == 0:

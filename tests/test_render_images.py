@@ -245,3 +245,20 @@ def test_contact_faces_are_drawn_in_the_contact_colour(renderer, dentition):
     px, rc = pixel_at(painted, view, c)
     assert is_contact_colour(px)
     assert not is_contact_colour(hidden[rc])
+
+
+def test_occlusal_views_keep_only_the_contacts_of_the_shown_arch(renderer, dentition):
+    """Seen from below, contacts between lower teeth would float over the upper arch."""
+    upper = labial_point(dentition, 11, 3.0)  # an upper crown (above the occlusal plane)
+    lower = labial_point(dentition, 41, 3.0)  # a lower crown (below it)
+    assert upper[1] > 1.5 and lower[1] < -1.5
+    state = FrameState.rest(dentition, contact_centers=np.stack([upper, lower]), contact_radii=np.array([0.8, 0.8]))
+    scene = DentitionScene(dentition, SIZE)
+    scene.update(state)
+    shown = {}
+    for view in ("frontal", "maxillary_occlusal", "mandibular_occlusal"):
+        renderer.render(scene, view)
+        shown[view] = np.asarray(scene.markers.positions)[:, 1]
+    assert len(shown["frontal"]) == 2
+    assert np.allclose(shown["maxillary_occlusal"], [upper[1]])
+    assert np.allclose(shown["mandibular_occlusal"], [lower[1]])
