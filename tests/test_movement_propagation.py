@@ -29,11 +29,11 @@ def test_the_share_is_a_parameter(share):
     assert np.allclose(bal.received[3], 100 * share**2 * X)
 
 
-def test_only_the_pushing_component_is_passed_on():
+def test_only_the_pushing_component_is_passed_on_and_the_pushing_tooth_stops():
     f = np.array([60.0, 0.0, 80.0])  # 60 cN into the neighbour, 80 cN sideways
     bal = propagate({1: f}, [(1, 2, X)], share=0.5, can_pass=always)
     assert np.allclose(bal.received[2], 30 * X)
-    assert np.allclose(bal.free[1], [0.0, 0.0, 80.0])  # still free to move sideways
+    assert np.allclose(bal.free[1], 0.0)  # the paper: on a collision the moving tooth stops
 
 
 def test_a_tooth_pulled_away_from_its_neighbour_passes_nothing():

@@ -4,7 +4,7 @@ For every pair of touching teeth (i, j), n_ij is the unit vector from i toward j
 centres in the occlusal (x-z) plane for neighbours along an arch, and vertical for upper-versus-lower
 (occlusal) contacts, which only stop and pass on vertical movement. When the force on i pushes into
 j (F_i . n_ij > 0), j receives the share s of that component along n_ij and i is blocked in that
-direction. The force j receives points along the arch, from j toward its own next tooth (the
+direction: it stops. The force j receives points along the arch, from j toward its own next tooth (the
 paper's director vector: the pushed tooth moves toward its next tooth, as a loaded one does); for
 occlusal contacts it stays vertical. What j receives adds to its own force and may be passed on again, down the arch, while
 the force on the passing tooth is still enough to move it (above the rate law's threshold). The
@@ -28,7 +28,7 @@ class ForceBalance:
     """The forces of one step (cN, arch frame), per tooth FDI.
 
     applied: the user's loads; received: passed on by touching teeth; total = applied + received;
-    free: what is left to move the tooth once the components pushing into touching teeth are taken out.
+    free: what moves the tooth: its total force, or nothing when it pushes into a touching tooth.
     blocked_by: tooth -> the teeth it pushes into (and so cannot move toward).
     passed: (from, to) -> the force vector (cN) passed on.
     """
@@ -80,14 +80,10 @@ def propagate(applied: Mapping[int, np.ndarray], contacts: Sequence[tuple[int, i
     total = {t: app[t] + received[t] for t in teeth}
     free, blocked_by = {}, {}
     for t in teeth:
-        f = total[t].copy()
-        pushes = [(j, n) for i, j, n in edges if i == t and float(total[t] @ n) > 0]
-        for _ in range(3):  # project out each blocked direction; repeat for directions that interact
-            for j, n in pushes:
-                c = float(f @ n)
-                if c > 0:
-                    f -= c * n
-        free[t] = f
+        pushes = [j for i, j, n in edges if i == t and float(total[t] @ n) > 0]
+        # the paper: on a collision the moving tooth stops (sideways remainders of forces that meet
+        # along a curved arch would otherwise slide it out of the arch)
+        free[t] = np.zeros(3) if pushes else total[t].copy()
         if pushes:
-            blocked_by[t] = [j for j, _ in pushes]
+            blocked_by[t] = pushes
     return ForceBalance(app, received, total, free, blocked_by, passed)
