@@ -65,13 +65,17 @@ def _headline(report: dict) -> dict:
 @click.option("--resolution", type=click.Choice(["coarse", "smooth"]), default="smooth", show_default=True,
               help="Parametric model resolution.")
 @click.option("--repeats", type=click.IntRange(1), default=50, show_default=True)
-def bench(out_file: Path | None, resolution: str, repeats: int) -> None:
+@click.option("--trees", type=click.Choice(["fit", "octree"]), default="fit", show_default=True,
+              help="Sphere-tree builder method (trees are cached on disk).")
+def bench(out_file: Path | None, resolution: str, repeats: int, trees: str) -> None:
     """Microseconds per whole-arch step of every detector and of python-fcl, same pairs, one run."""
     from ..parametric import parametric_dentition
+    from ..spheretree.cache import cached_sphere_tree
     from .bench import collision_timings
 
-    res = collision_timings(parametric_dentition(resolution=resolution), repeats=repeats)
-    res["model"] = f"parametric {resolution}, rest poses"
+    res = collision_timings(parametric_dentition(resolution=resolution), repeats=repeats,
+                            tree_builder=lambda mesh: cached_sphere_tree(mesh, method=trees))
+    res["model"] = f"parametric {resolution}, {trees} sphere trees (8 x 4 levels)"
     text = json.dumps(res, indent=1)
     click.echo(text)
     if out_file is not None:
