@@ -31,7 +31,43 @@ def _size(ctx, param, value: str) -> tuple[int, int]:
     return w, h
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+class _LazyGroup(click.Group):
+    """A command group whose heavier subgroups are imported only when they run.
+
+    Importing the sphere-tree and collision commands pulls trimesh, scipy and FCL (seconds on a
+    loaded machine); `orthosim --help` and `orthosim check` should not pay for that.
+    """
+
+    lazy = {  # name -> (module, attribute, one-line help shown by --help)
+        "spheretree": ("orthosim.spheretree.commands", "spheretree", "Build, export and evaluate sphere trees."),
+        "collide": ("orthosim.collision.commands", "collide", "Collision accuracy studies, timings and single queries."),
+    }
+
+    def list_commands(self, ctx):
+        return sorted([*super().list_commands(ctx), *self.lazy])
+
+    def get_command(self, ctx, name):
+        if name in self.lazy:
+            module, attr, _ = self.lazy[name]
+            import importlib
+
+            return getattr(importlib.import_module(module), attr)
+        return super().get_command(ctx, name)
+
+    def format_commands(self, ctx, formatter):
+        rows = []
+        for name in self.list_commands(ctx):
+            if name in self.lazy:
+                rows.append((name, self.lazy[name][2]))
+            else:
+                cmd = super().get_command(ctx, name)
+                if cmd is not None and not cmd.hidden:
+                    rows.append((name, cmd.get_short_help_str(limit=formatter.width - 6 - len(name))))
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
+
+
+@click.group(cls=_LazyGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(__version__, prog_name="orthosim")
 def main() -> None:
     """Headless orthodontic treatment simulator: tooth movement, collision detection, offscreen rendering."""
@@ -97,7 +133,10 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--no-simulate", is_flag=True, help="Skip the movement simulation (end to end on synthetic motion).")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
           no_png: bool, no_simulate: bool) -> None:
-    """Measure throughput (simulation, render alone, end to end) against the 40 fps target; write JSON."""
+    """Measure throughput against the 40 fps target; write JSON.
+
+    Simulation, each collision detector, rendering alone and end to end, in one run on one case.
+    """
     from render.bench import run_bench
 
     from .atomic import write_json
@@ -164,13 +203,6 @@ def _render_initial(dent, poses, extracted, out_dir: Path, opts: dict) -> dict:
                       color_contact_faces=opts.get("contact_faces", False))
 
 
-from .collision.commands import collide  # noqa: E402  (issue 5: orthosim collide validate|bench|step)
-
-main.add_command(collide)
-
-from .spheretree.commands import spheretree  # noqa: E402  (issue 3: orthosim spheretree build|eval)
-
-main.add_command(spheretree)
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
