@@ -376,15 +376,28 @@ def _exact_distance(model: MovementModel, P, pair) -> float:
     return exact.distance(*_fcl_pair(model, P, pair))
 
 
-def penetrations(model: MovementModel, P: Mapping[int, np.ndarray]) -> dict[tuple[int, int], float]:
+def penetrations(model: MovementModel, P: Mapping[int, np.ndarray], known: dict | None = None) -> dict[tuple[int, int], float]:
     """mm per intersecting candidate pair at poses P, on the exact meshes (FCL finds the
-    intersecting pairs, `exact.penetration_depth` measures how deep)."""
+    intersecting pairs, `exact.penetration_depth` measures how deep).
+
+    known: optional memo {(a, b): (pose a, pose b, depth)} of earlier steps, used and updated: a
+    pair neither of whose teeth has moved keeps its depth without a new measurement.
+    """
     out = {}
     for a, b in model.pairs:
+        if known is not None and (a, b) in known:
+            Ta, Tb, depth = known[(a, b)]
+            if np.array_equal(Ta, P[a]) and np.array_equal(Tb, P[b]):
+                if depth > 0:
+                    out[(a, b)] = depth
+                continue
         hit, _ = exact.collide(*_fcl_pair(model, P, (a, b)))
+        depth = 0.0
         if hit:
             ta, tb = model.dentition.teeth[a], model.dentition.teeth[b]
-            out[(a, b)] = exact.penetration_depth(ta.mesh, P[a], tb.mesh, P[b])
+            depth = out[(a, b)] = exact.penetration_depth(ta.mesh, P[a], tb.mesh, P[b])
+        if known is not None:
+            known[(a, b)] = (P[a].copy(), P[b].copy(), depth)
     return out
 
 
@@ -427,7 +440,8 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
     P = {n: np.asarray(T, float).copy() for n, T in model.dentition.rest_poses().items()}
     touching, leaves = _touching(model, detector, P)
     dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
-    initial_depths = penetrations(model, P)
+    depth_memo: dict = {}
+    initial_depths = penetrations(model, P, depth_memo)
     yield StepRecord(0, 0.0, {n: T.copy() for n, T in P.items()}, frozenset(), tuple(touching), leaves[0], leaves[1],
                      (), None, 0.0, dist, max(initial_depths.values(), default=0.0))
     for k in range(1, n_steps + 1):
@@ -533,7 +547,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                 events.append(CollisionEvent(pair, 1.0, _impact(model, pair, motions, P, dt, centers, s.restitution)))
         dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
         yield StepRecord(k, k * dt, {n: T.copy() for n, T in P.items()}, moved, tuple(touching), leaves[0], leaves[1],
-                         tuple(events), balance, max(0.0, _deepening(depths := penetrations(model, P), initial_depths)), dist,
+                         tuple(events), balance, max(0.0, _deepening(depths := penetrations(model, P, depth_memo), initial_depths)), dist,
                          max(depths.values(), default=0.0))
 
 
