@@ -111,3 +111,17 @@ def test_damaged_cache_entry_is_rebuilt(tmp_path):
     again = cached_sphere_tree(mesh, cache_dir=tmp_path)
     _same(tree, again)
     assert path.stat().st_size > 100
+
+
+def test_a_tooth_and_its_mirror_image_share_one_cache_entry(tmp_path):
+    """Left and right teeth are mirror images: one build serves both, and both trees hold their tooth."""
+    mesh = trimesh.creation.capsule(height=8.0, radius=2.5, count=[20, 20])
+    v = mesh.vertices + [1.5, 0.3, 0.0]  # off-centre, so the mirror is a different mesh
+    f = mesh.faces
+    right = cached_sphere_tree((v, f), cache_dir=tmp_path)
+    left = cached_sphere_tree((v * [-1, 1, 1], f[:, ::-1]), cache_dir=tmp_path)
+    assert len(list(tmp_path.glob("*.npz"))) == 1
+    right.validate(v, f)
+    left.validate(v * [-1, 1, 1], f[:, ::-1])
+    np.testing.assert_array_equal(left.leaf_centers, right.leaf_centers * [-1, 1, 1])
+    np.testing.assert_array_equal(left.leaf_radii, right.leaf_radii)

@@ -5,6 +5,11 @@ code, so the key is a SHA-256 of exactly those (plus `BUILDER_VERSION`, bumped w
 changes its output). A hit loads one small .npz in milliseconds; a miss builds and writes the file
 atomically, so two processes racing on the same tree both end with a whole file. The folder is
 `$ORTHOSIM_CACHE` if set, else `~/.cache/orthosim/spheretrees`.
+
+Left and right teeth are mirror images (x -> -x in the local frame, see `orthosim.tooth`), and a
+mirror maps a conservative tree to a conservative tree exactly (negating a float is exact), so a
+mesh and its mirror share one entry: the tree is built and stored for whichever of the two has the
+smaller key, and mirrored on the way out for the other. A full dentition costs half the builds.
 """
 
 from __future__ import annotations
@@ -61,22 +66,43 @@ def load_tree(path: str | Path) -> SphereTree:
         )
 
 
+_MIRROR = np.array([-1.0, 1.0, 1.0])
+
+
+def mirror_mesh(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh reflected in the y-z plane (x -> -x), faces re-wound to keep normals outward."""
+    return vertices * _MIRROR, np.ascontiguousarray(faces[:, ::-1])
+
+
+def mirror_tree(tree: SphereTree) -> SphereTree:
+    """The tree of the mirrored mesh: centres reflected, everything else (face order too) unchanged."""
+    return SphereTree(tree.branching, tuple(c * _MIRROR for c in tree.centers), tree.radii, tree.parents,
+                      tree.leaf_of_face, tree.method)
+
+
 def cached_sphere_tree(mesh, method: str = "fit", branching: int = 8, depth: int = 4, cache_dir: str | Path | None = None) -> SphereTree:
-    """`build_sphere_tree` through the on-disk cache: load the tree if this exact request was built before."""
+    """`build_sphere_tree` through the on-disk cache: load the tree if this mesh (or its mirror image)
+    was built before with the same request."""
     check_request(method, branching, depth)
     vertices, faces = mesh_arrays(mesh)
+    key = cache_key(vertices, faces, method, branching, depth)
+    mirrored = mirror_mesh(vertices, faces)
+    mirror_key = cache_key(*mirrored, method, branching, depth)
+    flip = mirror_key < key
     folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    path = folder / f"{cache_key(vertices, faces, method, branching, depth)}.npz"
+    path = folder / f"{min(key, mirror_key)}.npz"
+    tree = None
     if path.is_file():
         try:
             tree = load_tree(path)
-            if len(tree.leaf_of_face) == len(faces) and tree.branching == branching and tree.depth == depth:
-                return tree
+            if len(tree.leaf_of_face) != len(faces) or tree.branching != branching or tree.depth != depth:
+                tree = None
         except (OSError, ValueError, KeyError, zipfile.BadZipFile):
-            pass  # a damaged cache entry is rebuilt and overwritten below
-    tree = build_sphere_tree((vertices, faces), method, branching, depth)
-    try:
-        save_tree(tree, path)
-    except OSError:
-        pass  # a read-only or full cache folder costs a rebuild next time, never a failure
-    return tree
+            tree = None  # a damaged cache entry is rebuilt and overwritten below
+    if tree is None:
+        tree = build_sphere_tree(mirrored if flip else (vertices, faces), method, branching, depth)
+        try:
+            save_tree(tree, path)
+        except OSError:
+            pass  # a read-only or full cache folder costs a rebuild next time, never a failure
+    return mirror_tree(tree) if flip else tree
