@@ -5,8 +5,7 @@ angular velocity about the local origin). Each node centre is followed along its
 radius inflated by the centre's largest deviation from that chord (`motion.chord_deviation_bound`).
 A node pair is pruned when a lower bound of the chord distance |A + t B| over [0, 1] exceeds the
 sum of the inflated radii; at leaf pairs Eq. 2 gives the first time of contact of the inflated
-spheres. The least such time of
-a tooth pair is never later than the meshes' own first contact.
+spheres. The least such time of a tooth pair is never later than the meshes' own first contact.
 
 `refine_time_of_contact` then optionally advances that time on the exact meshes by conservative
 advancement: at time t with mesh distance d, no point can close the gap faster than the bound mu

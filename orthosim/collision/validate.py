@@ -370,18 +370,25 @@ def thin_root_mesh(length: float = 14.0, radius: float = 0.4, sections: int = 12
     return m
 
 
-def default_tooth_sets(real_folder: str | Path | None = None, real_numbers=(3, 4, 5, 6, 7, 8, 9)) -> list[ToothSet]:
-    """Parametric coarse teeth (adjacent pairs of one quadrant plus a facing pair), thin roots
-    against parametric teeth, and, when the folder exists, real Open-Full-Jaw upper teeth."""
+def default_tooth_sets(real_folder: str | Path | None = None, real_numbers=(3, 4, 5, 6, 7, 8, 9),
+                       resolutions=("smooth", "coarse")) -> list[ToothSet]:
+    """Parametric teeth at each resolution (adjacent pairs of one quadrant plus facing pairs), thin
+    roots against coarse parametric crowns, and, when the folder exists, real Open-Full-Jaw upper
+    teeth (neighbours along the arch)."""
     from ..parametric import parametric_dentition
 
-    d = parametric_dentition(resolution="coarse")
     fdis = [11, 12, 13, 14, 15, 16, 17, 41, 46]
-    meshes = tuple(d.teeth[n].mesh for n in fdis)
     adj = tuple((k, k + 1) for k in range(6)) + ((0, 7), (5, 8))
-    sets = [ToothSet("parametric", meshes, adj)]
+    sets, coarse = [], None
+    for res in resolutions:
+        d = parametric_dentition(resolution=res)
+        meshes = tuple(d.teeth[n].mesh for n in fdis)
+        sets.append(ToothSet(f"parametric_{res}", meshes, adj))
+        if res == "coarse":
+            coarse = meshes
+    crowns = coarse if coarse is not None else sets[0].meshes
     roots = (thin_root_mesh(14.0, 0.4), thin_root_mesh(10.0, 0.25))
-    sets.append(ToothSet("thin_root", roots + meshes[:3], ((0, 2), (0, 3), (1, 4), (0, 1), (1, 2))))
+    sets.append(ToothSet("thin_root", roots + crowns[:3], ((0, 2), (0, 3), (1, 4), (0, 1), (1, 2))))
     if real_folder is not None and Path(real_folder).exists():
         real = []
         for n in real_numbers:
