@@ -127,3 +127,37 @@ def test_a_wire_that_cannot_do_the_movement_is_refused_before_the_run(tmp_path):
         _case(tmp_path, [], 'teeth = [11]\nforce_cN = 100\nmovement = "translation"', wire="round")
     msg = str(err.value)
     assert "loads[0].movement" in msg and "round wire" in msg and "rectangular" in msg
+
+
+@pytest.mark.parametrize("restitution", [0.5, 1.0])
+def test_each_collision_reports_the_impact_and_the_kinetic_energy_lost(built, tmp_path, restitution):
+    case = _case(tmp_path, [12, 14], 'teeth = [13]\nforce_cN = 100\nmovement = "extrusion"\n'
+                 f'[simulation]\nrestitution = {restitution}', days=140)
+    _, recs = _run(built, case, "continuous")
+    events = [e for r in recs for e in r.collisions if set(e.pair) == {13, 43}]
+    assert len(events) == 1  # one collision: afterwards the contact is held, not struck again
+    hit = events[0].impact
+    assert hit["restitution"] == restitution
+    assert hit["impulse_g_mm_per_day"] > 0
+    if restitution == 1.0:
+        assert hit["kinetic_energy_lost_J"] == pytest.approx(0.0, abs=1e-12 * hit["kinetic_energy_before_J"])
+    else:
+        assert 0 < hit["kinetic_energy_lost_fraction"] < 1
+
+
+def test_the_step_is_a_parameter_and_free_movement_does_not_depend_on_it(built, tmp_path):
+    load = 'teeth = [15]\nforce_cN = 150\ndirection = "mesial"\nmovement = "translation"'
+    ends = []
+    for step in (7, 14, 28):
+        model, recs = _run(built, _case(tmp_path, [14, 16], load, days=56, step=step))
+        assert len(recs) == 56 // step + 1
+        ends.append(recs[-1].poses[15])
+    assert np.allclose(ends[0], ends[1], atol=1e-9) and np.allclose(ends[0], ends[2], atol=1e-9)
+
+
+def test_the_exact_mesh_detector_also_runs_and_stops_a_tooth_within_one_steps_travel(built, tmp_path):
+    case = _case(tmp_path, [12, 14], 'teeth = [13]\nforce_cN = 100\nmovement = "extrusion"', days=140)
+    model, recs = _run(built, case, "exact")
+    first = next(r for r in recs if any(set(e.pair) == {13, 43} for e in r.collisions))
+    travel = RateLaw().rate(100, model.mechanics[13].root_area_mm2) * 7
+    assert first.max_penetration_mm <= travel + 1e-6  # discrete: it may sink in by up to a step's travel
