@@ -1,22 +1,24 @@
 """`orthosim bench`: throughput of each stage, measured in one run on one case, against the 40 fps target.
 
-What is measured (median over per-frame wall times after a warm-up, so a stray slow frame on a
-shared machine does not move the figure; fps = 1 / median frame time):
-  - render: draw plus colour read-back of one 640x480 frame, the scene already updated;
-  - simulation: one step of the case's movement, contact detection included, alone;
-  - end_to_end: simulate one step (contacts detected with the continuous detector), update the
-    scene, render, read back, and encode (MP4 always, PNG frames unless disabled) on the background
-    encoders of `render.animation.FrameSink`, whose bounded queues make the loop wait for them;
-  - render_variants: the same render with each optimisation switched off in turn, measured
+What is measured (fps = 1 / median frame time after a warm-up, so a stray slow frame on a shared
+machine does not move the figure; the end-to-end records also give frames / total wall time):
+  - simulation: one step of the case's movement (`orthosim.movement`), whose step loop runs the
+    continuous detector and reports the overlapping leaf spheres, alone;
+  - collision_us_per_step: each detector alone on one whole-arch step of the same model
+    (`orthosim.collision.bench.collision_timings`), and the same as fps;
+  - render: draw plus colour read-back of one 640x480 frame, the scene already updated, with
+    `SyntheticMotion` (all 28 teeth, 2,000 markers: the issue's worst case);
+  - end_to_end: the pipeline `render_run` uses, frame to frame: the next step simulated on a
+    thread (`animation.prefetch`) while this one updates the scene, renders, reads back, and
+    encodes (MP4 always, PNG frames unless disabled) on the background encoders of
+    `animation.FrameSink`, whose bounded queues make the loop wait for them;
+    `end_to_end_synthetic` is the same with `SyntheticMotion` instead of the simulation;
+  - render_variants: the same render with each optimisation undone in turn, measured
     round-robin in the same run so that the ratios stand even when the absolute figures wander
     with the machine's load;
-  - memory: resident set size before and after a long (default 2,000 frames) update+render run:
-    leaked GL programs or buffers would show there.
-Components that do not exist yet are reported as null with a "pending" note, never estimated.
-
-With a case, the simulation figures run the case through `orthosim.movement` (its step loop runs
-the continuous detector and reports the overlapping leaf spheres, which become the markers), and
-`collision_us_per_step` comes from `orthosim.collision.bench.collision_timings` on the same model.
+  - memory_mb: resident set size before and after a long (default 2,000 frames) update+render
+    run: leaked GL programs or buffers would show there.
+Components that are missing are reported as null with a "pending" note, never estimated.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import platform
 import statistics
 import time
 from pathlib import Path
+
 import numpy as np
 
 from .frame_state import FrameState
