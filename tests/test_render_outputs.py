@@ -115,3 +115,15 @@ def test_prefetch_keeps_order_and_surfaces_producer_errors():
         for x in prefetch(failing()):
             got.append(x)
     assert got == [1]
+
+
+def test_a_failed_run_leaves_no_partial_video(tmp_path, dentition):
+    def states():
+        yield FrameState.rest(dentition)
+        yield FrameState.rest(dentition)
+        raise OrthosimError("case.toml", "loads", "cannot continue")
+
+    with pytest.raises(OrthosimError):
+        render_run(dentition, states(), tmp_path, size=(160, 120), progress=False)
+    assert not (tmp_path / "animation.mp4").exists()
+    assert not [p for p in tmp_path.rglob(".*")]  # no temporary files either
