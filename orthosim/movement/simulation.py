@@ -141,8 +141,8 @@ class MovementModel:
               settings: MovementSettings | None = None, tree_builder: Callable | None = None) -> "MovementModel":
         settings = settings or MovementSettings.from_case(case)
         dentition = dentition or case.build_dentition()
-        if collision is None:
-            collision = CollisionModel.from_dentition(dentition, tree_builder=tree_builder or default_tree_builder())
+        if collision is None:  # the project's cached sphere trees unless a builder is given
+            collision = CollisionModel.from_dentition(dentition, tree_builder=tree_builder)
         extracted = frozenset(case.extractions)
         present = tuple(n for n in dentition.fdis if n not in extracted)
         pairs = candidate_pairs(dentition.fdis, extracted)
@@ -150,27 +150,6 @@ class MovementModel:
         facing = frozenset(p for p in pairs if tuple(p) not in neighbours)
         mech = {n: build_mechanics(dentition.teeth[n], settings.resistance_rule, settings.resistance_fraction) for n in present}
         return cls(case, dentition, collision, mech, settings, extracted, present, tuple(map(tuple, pairs)), facing)
-
-
-def default_tree_builder() -> Callable:
-    """The project's sphere-tree builder (cached when the spheretree package offers it), else the
-    optimising `fit` builder, memoised per mesh for the life of the process."""
-    try:
-        from ..collision.model import default_tree_builder as project_builder
-
-        return project_builder()
-    except Exception:  # the spheretree package has no cached builder yet
-        from ..spheretree.fit import build_fit_tree
-
-        cache: dict[bytes, object] = {}
-
-        def build(mesh):
-            key = mesh.vertices.tobytes() + mesh.faces.tobytes()
-            if key not in cache:
-                cache[key] = build_fit_tree(mesh.vertices, mesh.faces)
-            return cache[key]
-
-        return build
 
 
 # ---------------------------------------------------------------------------------------------
