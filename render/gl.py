@@ -23,7 +23,35 @@ import os
 import sys
 import types
 
+from orthosim.errors import OrthosimError
+
 _loaded = None
+
+
+class RenderSetupError(OrthosimError):
+    """Offscreen OpenGL cannot start on this machine (a missing system library, usually)."""
+
+
+def osmesa_platform(width: int, height: int):
+    """A current OSMesa context (pyrender's platform object) of the given size, or a one-line error."""
+    load_pyrender()
+    try:
+        from pyrender.platforms.osmesa import OSMesaPlatform
+
+        platform = OSMesaPlatform(width, height)
+        platform.init_context()
+        if not platform._context:
+            raise RuntimeError("OSMesaCreateContextAttribs returned no context")
+        platform.make_current()
+    except (ImportError, OSError, AttributeError, RuntimeError, AssertionError) as exc:
+        chosen = os.environ.get("PYOPENGL_PLATFORM", "osmesa")
+        fix = ("unset PYOPENGL_PLATFORM (orthosim renders through osmesa), or run with --no-render"
+               if chosen != "osmesa" else
+               "install the libosmesa6 system package (bash tools/dev.sh install) and PyOpenGL 3.1.10, "
+               "or run with --no-render")
+        raise RenderSetupError("PYOPENGL_PLATFORM", chosen,
+                               f"cannot create an offscreen OSMesa context ({type(exc).__name__}: {exc})", fix) from exc
+    return platform
 
 
 def _context_key(cid) -> int:

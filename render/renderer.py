@@ -25,7 +25,7 @@ import weakref
 
 import numpy as np
 
-from .gl import load_pyrender, shader_dir
+from .gl import load_pyrender, osmesa_platform, shader_dir
 
 
 def _lean_renderer_class(pyrender, GL):
@@ -270,7 +270,6 @@ class Renderer:
         exist only so that the bench can measure what each optimisation buys."""
         pyrender = load_pyrender()
         from OpenGL import GL
-        from pyrender.platforms.osmesa import OSMesaPlatform
 
         self._GL = GL
         self._pyrender = pyrender
@@ -278,9 +277,8 @@ class Renderer:
         self.alpha = alpha
         self.msaa = msaa
         w, h = self.size
-        self._platform = OSMesaPlatform(w, h)
-        self._platform.init_context()
-        self._platform.make_current()
+        self._platform = None
+        self._platform = osmesa_platform(w, h)
         if lean and shading != "lambert":
             raise ValueError("the lean forward pass drives orthosim's Lambert shaders only")
         self._inner = (_lean_renderer_class(pyrender, GL)(w, h, lighting=lighting) if lean
