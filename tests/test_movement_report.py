@@ -91,3 +91,11 @@ def test_distances_csv_has_one_row_per_adjacent_pair(run):
     assert first["pair"] == f"{records[0].distances[0].pair[0]}-{records[0].distances[0].pair[1]}"
     assert float(first["final_mm"]) == pytest.approx(records[-1].distances[0].distance_mm, abs=1e-4)
     assert not list(out.glob(".*"))  # written atomically: no temporary files left
+
+
+def test_loaded_teeth_report_their_centre_of_resistance_and_movement(run):
+    model, _, out = run
+    t16 = json.loads((out / "metrics.json").read_text())["teeth"]["16"]
+    assert t16["movement"] == "translation"
+    assert t16["moment_to_force_mm"] == pytest.approx(model.mechanics[16].bracket_lever_mm)  # the wire's counter-moment
+    assert np.allclose(t16["center_of_resistance_local_mm"], model.mechanics[16].center_of_resistance)

@@ -6,7 +6,8 @@
     report.write(out_dir)
 
 metrics.json: `case`, `detector`, `steps`, `teeth` {FDI: `moved_mm` (crown centre displacement),
-`rotated_deg`, `final_pose` (4x4, mm), `extracted`}, `total_distance_mm` {`initial`, `final`},
+`rotated_deg`, `final_pose` (4x4, mm), `extracted`; for loaded teeth also their centre of
+resistance, the loads' moment-to-force ratio (mm) and the movement it makes}, `total_distance_mm` {`initial`, `final`},
 `max_penetration_mm` (exact meshes, over the run: the deepest
 interpenetration the movement added to any pair; `initial_penetration_mm` is the model's own), `collisions` (count), `distances` (per adjacent
 pair: `pair`, `initial_mm`, `final_mm`), and `per_step`: for every step its time (days), the pose of
@@ -25,6 +26,7 @@ import numpy as np
 
 from ..atomic import write_json, write_text
 from ..collision.motion import rotation_angle
+from .biomechanics import movement_type
 from .simulation import MovementModel, StepRecord
 
 
@@ -88,6 +90,8 @@ class RunReport:
                 "final_pose": last.poses[n],
                 "extracted": n in m.extracted,
             }
+        for n, info in self._load_movements().items():
+            teeth[str(n)].update(info)
         s = m.settings
         return {
             "case": m.case.name,
@@ -113,6 +117,30 @@ class RunReport:
                           for a, b in zip(first.distances, last.distances)],
             "per_step": self.per_step,
         }
+
+    def _load_movements(self) -> dict[int, dict]:
+        """Per loaded tooth: its centre of resistance (local mm), the couple-to-force ratio of its
+        loads at the bracket (mm) and the movement that ratio and the wire make."""
+        m = self.model
+        out: dict[int, dict] = {}
+        for load in m.case.loads:
+            for n in load.teeth:
+                if n not in m.mechanics:
+                    continue
+                mech = m.mechanics[n]
+                if m.case.wire.type == "round":
+                    kind, ratio = "tipping about 1/3 of the root (round wire)", 0.0
+                elif load.force_cN == 0.0:
+                    kind, ratio = ("rotation about the long axis" if load.moment_axis == "long_axis"
+                                   else "rotation about the crown (torque)"), float("inf")
+                elif load.movement in ("translation", "extrusion", "intrusion") or load.moment_cNmm == 0.0:
+                    kind, ratio = load.movement if load.movement != "auto" else "translation", mech.bracket_lever_mm
+                else:
+                    ratio = abs(load.moment_cNmm) / load.force_cN
+                    kind = movement_type(mech, ratio)
+                out[n] = {"center_of_resistance_local_mm": mech.center_of_resistance,
+                          "moment_to_force_mm": ratio if np.isfinite(ratio) else None, "movement": kind}
+        return out
 
     def distances_csv(self) -> str:
         out = io.StringIO()
