@@ -239,7 +239,7 @@ def build_parametric_dentition(resolution: int | str = "smooth", third_molars: b
     query = MeshQuery({n: b.mesh for n, b in blanks.items()})
 
     # Lower arch: the curve is as long as the teeth (to the second molars; third molars go beyond).
-    lower_half = sum(dimensions(40 + p).md_width for p in range(1, 8))
+    lower_half = sum(dimensions(40 + p).md_width for p in range(1, 8)) + 0.5 * diastema_mm
     lower_curve = arch_with_half_length(settings.lower_arch_width, lower_half)
     z_shift = -0.5 * lower_curve.depth
     lower_teeth = {n: b for n, b in blanks.items() if F.arch_of(n) is F.Arch.LOWER}
@@ -257,7 +257,11 @@ def build_parametric_dentition(resolution: int | str = "smooth", third_molars: b
             poses = {**lower_poses, **upper.place(curve, slides)}
             return [overjet(probe, poses) - settings.overjet, molar_relation(probe, poses) - settings.molar_relation]
 
-        sol = least_squares(residual, guess, diff_step=1e-3, xtol=1e-6)
+        # The upper arch is wider and deeper than the lower one (it overlaps it by about 2 mm in
+        # front and at the sides); the bounds keep the solver from wandering to another root.
+        lo = [lower_curve.width, lower_curve.depth]
+        hi = [lower_curve.width + 15.0, lower_curve.depth + 10.0]
+        sol = least_squares(residual, np.clip(guess, lo, hi), bounds=(lo, hi), diff_step=1e-3, xtol=1e-6)
         return BetaArch(*sol.x), sol.x
 
     guess = np.array([lower_curve.width + 6.0, lower_curve.depth + 2.0])

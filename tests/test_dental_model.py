@@ -155,3 +155,17 @@ def test_diastema_opens_a_space_between_the_central_incisors():
     d1 = {d.pair: d.distance_mm for d in tooth_to_tooth_distances(opened)}
     assert d1[(11, 21)] > d0[(11, 21)] + 1.5
     assert d1[(12, 11)] == pytest.approx(d0[(12, 11)], abs=0.3)  # the rest of the arch still touches
+
+
+@pytest.mark.parametrize("resolution, diastema", [("coarse", 0.0), ("coarse", 2.0), ("smooth", 2.0)])
+def test_every_variant_of_the_model_keeps_normal_occlusion_without_interpenetration(resolution, diastema):
+    d = parametric_dentition(resolution, diastema_mm=diastema)
+    q = MeshQuery({n: t.mesh for n, t in d.teeth.items()})
+    p = d.rest_poses()
+    for u in d.arch(F.Arch.UPPER):
+        for low in d.arch(F.Arch.LOWER):
+            assert not q.intersects(u, p[u], low, p[low]), (u, low)
+    for a, b in d.adjacent_pairs():
+        assert not q.intersects(a, p[a], b, p[b]), (a, b)
+    assert overjet(d) == pytest.approx(2.0, abs=0.5) and overbite(d) == pytest.approx(2.0, abs=0.5)
+    assert abs(molar_relation(d)) < 1.0
