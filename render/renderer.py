@@ -51,7 +51,7 @@ def _lean_renderer_class(pyrender, GL):
             self.static_key = None
             self.cache_name = None
             self.cache_hits = self.cache_builds = 0
-            self._readback = np.empty((self.viewport_height, self.viewport_width, 4), np.uint8)
+            self.read_channels = 3  # 4 for RGBA output, set by Renderer
             self._shader_files = ("gouraud.vert", "gouraud.frag") if lighting == "vertex" else ("mesh.vert", "mesh.frag")
 
         def _program_for(self, primitive, n_lights: int):
@@ -134,6 +134,7 @@ def _lean_renderer_class(pyrender, GL):
         def _begin(self, fb, clear_color=None):
             GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, fb)
             GL.glViewport(0, 0, self.viewport_width, self.viewport_height)
+            GL.glFrontFace(GL.GL_CW)  # the projection is mirrored vertically, see _frame_constants
             GL.glEnable(GL.GL_DEPTH_TEST)
             GL.glDepthMask(GL.GL_TRUE)
             GL.glDepthFunc(GL.GL_LESS)
@@ -145,6 +146,10 @@ def _lean_renderer_class(pyrender, GL):
 
         def _frame_constants(self, scene):
             V, P = self._get_camera_matrices(scene)
+            # Draw upside down: GL stores the bottom row first, so the mirrored image reads back
+            # top row first and goes to the encoders without a flipping copy. Mirroring reverses
+            # the winding of every triangle, hence glFrontFace(GL_CW) in _begin.
+            P = np.diag([1.0, -1.0, 1.0, 1.0]) @ P
             cam_pos = scene.get_pose(scene.main_camera_node)[:3, 3].astype(np.float32)
             VP = np.ascontiguousarray(V.T, dtype=np.float32), np.ascontiguousarray(P.T, dtype=np.float32)
             lights = []
@@ -254,9 +259,13 @@ def _lean_renderer_class(pyrender, GL):
                 self._draw(scene, nodes, VP, cam_pos, lights)
             GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, work)
             w, h = self.viewport_width, self.viewport_height
-            GL.glReadPixels(0, 0, w, h, GL.GL_RGBA, GL.GL_UNSIGNED_BYTE, self._readback)
+            # a new array per frame: the encoders still hold the previous ones
+            image = np.empty((h, w, self.read_channels), np.uint8)
+            GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 1)
+            GL.glReadPixels(0, 0, w, h, GL.GL_RGBA if self.read_channels == 4 else GL.GL_RGB, GL.GL_UNSIGNED_BYTE,
+                            image)
             GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
-            return self._readback
+            return image
 
     return LeanRenderer
 
@@ -290,6 +299,8 @@ class Renderer:
         self.lean = lean
         self.lighting = lighting if lean else "pixel"
         self.static_cache = static_cache and lean and not msaa
+        if lean:
+            self._inner.read_channels = 4 if alpha else 3
         # weak keys: a renderer that outlives many scenes must not keep their meshes alive
         self._seen_versions = weakref.WeakKeyDictionary()
         self._instance_capacity = weakref.WeakKeyDictionary()
@@ -330,7 +341,7 @@ class Renderer:
         if self.msaa:
             rgba = out
         elif self.lean:
-            rgba = out[::-1]  # GL returns the bottom row first
+            return out  # already top row first, with the channels asked for (see _forward_pass)
         else:
             self._GL.glFinish()
             buf = np.asarray(self._platform._buffer)  # (h, w, 4) uint8, OSMesa's own colour buffer
@@ -373,7 +384,8 @@ class Renderer:
         GL.glBlitFramebuffer(0, 0, w, h, 0, 0, w, h, GL.GL_COLOR_BUFFER_BIT, GL.GL_LINEAR)
         GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, inner._main_fb)
         data = GL.glReadPixels(0, 0, w, h, GL.GL_RGBA, GL.GL_UNSIGNED_BYTE)
-        return np.frombuffer(data, dtype=np.uint8).reshape(h, w, 4)[::-1]
+        rows = np.frombuffer(data, dtype=np.uint8).reshape(h, w, 4)
+        return rows if self.lean else rows[::-1]  # the lean pass draws mirrored (top row first)
 
     def _sync_buffers(self, scene) -> None:
         """Upload the primitives the scene changed since the last draw (see DentitionScene.buffer_versions)."""

@@ -13,8 +13,9 @@ out vec4 frag_color;
 
 void main()
 {
+    // gl_PointCoord's t runs toward window -y, which is camera +y: the renderer draws the image
+    // mirrored vertically (see render/renderer.py, _frame_constants)
     vec2 q = gl_PointCoord * 2.0 - 1.0;
-    q.y = -q.y;  // gl_PointCoord runs downward; camera y runs up
     float rr = dot(q, q);
     if (rr > 1.0) {
         discard;

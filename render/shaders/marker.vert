@@ -23,8 +23,8 @@ void main()
     center_view = c.xyz;
     radius = texcoord_0.x;
     gl_Position = P * c;
-    // projected diameter in pixels (perspective: P[1][1] = cot(yfov / 2)); at least 3 px so that
-    // a tiny contact never disappears
-    float d = 2.0 * radius * P[1][1] / max(-c.z, 1e-3) * 0.5 * viewport_height;
+    // projected diameter in pixels (perspective: |P[1][1]| = cot(yfov / 2); the renderer mirrors
+    // y, hence abs); at least 3 px so that a tiny contact never disappears
+    float d = 2.0 * radius * abs(P[1][1]) / max(-c.z, 1e-3) * 0.5 * viewport_height;
     gl_PointSize = max(d, 3.0);
 }
