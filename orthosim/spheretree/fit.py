@@ -1,17 +1,22 @@
 """The optimising sphere-tree builder: few, large, deep-set leaf spheres with little volume outside.
 
 A leaf covers a patch of the tooth surface. Any sphere holding a patch's vertices holds the patch
-(exact coverage), and among those the best one has its centre sunk inward along the patch normal:
-a bigger sphere centred deeper leaves a thinner cap outside the surface (cap volume
-~ pi rho^4 / (4 R) for a patch of radius rho), until it starts to bulge out elsewhere. So:
+(exact coverage), and among those the best one has its centre sunk inward: a bigger sphere centred
+deeper leaves a thinner cap outside the surface (cap volume ~ pi rho^4 / (4 R) for a patch of
+radius rho), until it bulges out elsewhere. Where the tooth is thin (roots), one sphere on the
+medial axis holds both sides at once. So:
 
-1. Partition the surface triangles top-down: the triangles of each node are split into up to
-   `branching` groups by k-means on (centroid, scaled normal), level by level, all nodes of a
-   level at once. Leaves are the groups of the last level; the tree shape follows for free.
+1. Leaves first: k-means of all triangles into branching**(depth-1) patches, on the centroids
+   pulled toward the medial axis (x - pull * rho(x) * n(x), rho the
+   radius of the largest inside ball touching x), so the two sides of a thin root fall together.
 2. Fit each leaf: candidate centres along the patch's inward normal, then a pattern search in 3D;
    the radius is always the distance to the farthest patch vertex, and the score is the number of
-   points of an outside-the-tooth voxel band that fall in the sphere (its outside volume).
-3. Each inner node is the near-minimal sphere around all vertices of its triangles, so it holds
+   voxels of an outside-the-tooth band that fall in the sphere (its outside volume).
+3. Improve: leaves emptied below refill by splitting the worst leaves in two, each triangle moves
+   to the leaf that holds it most deeply (it only moves into a sphere that already holds it, so coverage
+   stays exact, and the sphere it leaves can shrink), and the spheres are searched again.
+4. Group the leaves top-down into nodes of at most `branching` children (k-means with capacity);
+   each inner node is the near-minimal sphere around all vertices of its triangles, so it holds
    everything its children hold and a descent never loses a contact.
 
 All coordinates in mm, in the mesh's frame.
@@ -34,13 +39,12 @@ from .tree import SphereTree
 class FitOptions:
     """Knobs of the optimising builder (defaults tuned on the parametric and real teeth)."""
 
-    normal_weight: float = 0.0  # normal's weight in k-means features, in units of the patch size
-    medial_pull: float = 0.6  # k-means on x - medial_pull * rho(x) * n(x): 0 surface, 1 medial centres
+    medial_pull: float = 0.8  # k-means on x - medial_pull * rho(x) * n(x): 0 surface, 1 medial centres
     medial_cap_mm: float = 4.0  # rho capped at this depth, mm
     medial_samples: int = 4000  # faces on which rho is estimated
     lloyd_iterations: int = 12
-    partition: str = "bottom_up"  # or "top_down": split the triangles level by level
-    area_weighted: bool = False  # k-means balances area (True) or triangle count (False)
+    reserve: float = 0.0  # share of the leaves first kept back, then spent on splitting the worst
+    split_per_round: float = 1 / 64  # share of the leaves split (worst first) in each improve round
     voxel_mm: float = 0.15  # spacing of the outside-band voxels that score spheres, mm
     max_voxels: int = 4_000_000  # the spacing grows on huge meshes to keep the grid this small
     band_mm: float = 0.75  # thickness of the outside band that scores spheres, mm
@@ -48,49 +52,10 @@ class FitOptions:
     depths: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0)  # x patch radius
     search_rounds: int = 8
     reassign_rounds: int = 3
+    reassign_candidates: int = 24  # leaves (nearest centres) a face may move to
+    relative_depth: bool = True  # reassignment compares depth / radius (True) or depth in mm
     refit_rounds: int = 8  # pattern-search rounds after each reassignment
     seed: int = 0
-
-
-def _batched_kmeans(
-    features: np.ndarray, node: np.ndarray, n_nodes: int, k: int, iterations: int, rng, weights: np.ndarray | None = None
-) -> np.ndarray:
-    """Split the points of every node into at most k clusters at once.
-
-    `features` (F, d), `node` (F,) int, `weights` (F,) (e.g. triangle areas, so clusters balance
-    area rather than triangle count): returns (F,) int label in [0, k) within each point's node.
-    Initial centres by farthest-point sampling per node (spread out, deterministic given rng).
-    """
-    F = len(features)
-    order = np.argsort(node, kind="stable")
-    counts = np.bincount(node, minlength=n_nodes)
-    start = np.cumsum(counts) - counts
-    centres = np.zeros((n_nodes, k, features.shape[1]))
-    # First centre: a random point of each node; then the point farthest from all chosen so far.
-    pick = start + (rng.random(n_nodes) * np.maximum(counts, 1)).astype(np.int64)
-    pick = order[np.minimum(pick, F - 1)]
-    centres[:, 0] = features[pick]
-    mind = ((features - centres[node, 0]) ** 2).sum(axis=1)
-    for j in range(1, k):
-        # Per-node argmax of mind: sort by (node, mind) and take the last of each node.
-        o = np.lexsort((mind, node))
-        last = o[np.cumsum(counts) - 1]
-        centres[:, j] = features[last]
-        mind = np.minimum(mind, ((features - centres[node, j]) ** 2).sum(axis=1))
-    # Nodes with fewer than k points repeat centres; duplicates simply stay empty.
-    label = np.zeros(F, dtype=np.int64)
-    for _ in range(iterations):
-        d = ((features[:, None, :] - centres[node]) ** 2).sum(axis=2)  # (F, k)
-        label = d.argmin(axis=1)
-        key = node * k + label
-        w = np.ones(F) if weights is None else weights
-        cnt = np.bincount(key, weights=w, minlength=n_nodes * k).reshape(n_nodes, k)
-        sums = np.stack(
-            [np.bincount(key, weights=w * features[:, i], minlength=n_nodes * k) for i in range(features.shape[1])], axis=1
-        ).reshape(n_nodes, k, -1)
-        filled = cnt > 0
-        centres[filled] = sums[filled] / cnt[filled][:, None]
-    return label
 
 
 def medial_radii(
@@ -115,44 +80,6 @@ def medial_radii(
         r_new = np.einsum("ij,ij->i", v, v) / np.where(denom > 1e-12, denom, 1.0)
         r = np.where(shrink, np.minimum(r, r_new), r)
     return r
-
-
-def partition_faces(
-    vertices: np.ndarray, faces: np.ndarray, branching: int, depth: int, options: FitOptions
-) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """Top-down split of the triangles: per level, (F,) node of each face and (n_k,) parent of each node."""
-    rng = np.random.default_rng(options.seed)
-    tri = vertices[faces]
-    centroid = tri.mean(axis=1)
-    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    area = 0.5 * np.linalg.norm(cross, axis=1)
-    normal = cross / np.maximum(2 * area, 1e-300)[:, None]
-    total_area = float(area.sum())
-    if options.medial_pull:
-        # Estimated on a subsample of faces (a smooth field), spread to the rest by nearest face.
-        sub = rng.choice(len(faces), size=min(len(faces), options.medial_samples), replace=False)
-        rho_sub = medial_radii(centroid[sub], normal[sub], vertices, options.medial_cap_mm)
-        rho = rho_sub[cKDTree(centroid[sub]).query(centroid)[1]]
-        centroid = centroid - (options.medial_pull * np.minimum(rho, options.medial_cap_mm))[:, None] * normal
-    if options.partition == "bottom_up" and depth > 1:
-        return _bottom_up(centroid, area, branching, depth, options, rng)
-    node = np.zeros(len(faces), dtype=np.int64)
-    node_of_face = [node]
-    parents = [np.array([-1], dtype=np.int64)]
-    n_nodes = 1
-    for k in range(1, depth):
-        patch = np.sqrt(total_area / branching**k)  # typical size of a node of this level, mm
-        feats = np.concatenate([centroid, options.normal_weight * patch * normal], axis=1)
-        label = _batched_kmeans(feats, node, n_nodes, branching, options.lloyd_iterations, rng,
-                                area if options.area_weighted else None)
-        # Number the non-empty (node, label) groups in order: sorted by parent by construction.
-        key = node * branching + label
-        used, new = np.unique(key, return_inverse=True)
-        parents.append(used // branching)
-        node = new.astype(np.int64)
-        node_of_face.append(node)
-        n_nodes = len(used)
-    return node_of_face, parents
 
 
 def _farthest_points(points: np.ndarray, k: int, rng) -> np.ndarray:
@@ -208,44 +135,6 @@ def _split_with_capacity(points: np.ndarray, k: int, capacity: int, rng, iterati
             if (label == j).any():
                 centres[j] = points[label == j].mean(axis=0)
     return label
-
-
-def _bottom_up(centroid: np.ndarray, area: np.ndarray, branching: int, depth: int, options: FitOptions, rng):
-    """Leaves first (k-means of all triangles into branching**(depth-1)), then group leaves upward.
-
-    Leaves are then free of the borders a top-down split would impose; the groups above are built
-    top-down over the leaves with a capacity, so every node keeps at most `branching` children.
-    """
-    leaf = _kmeans(centroid, branching ** (depth - 1), options.lloyd_iterations, rng,
-                   area if options.area_weighted else None)
-    n_leaves = int(leaf.max()) + 1
-    cnt = np.bincount(leaf, weights=area, minlength=n_leaves)
-    leaf_pos = np.stack([np.bincount(leaf, weights=area * centroid[:, i], minlength=n_leaves) for i in range(3)], 1)
-    leaf_pos /= cnt[:, None]
-    # path[i, k] = child index taken at level k+1 on the way from the root to leaf i.
-    path = np.zeros((n_leaves, depth - 1), dtype=np.int64)
-    groups = [np.arange(n_leaves)]
-    for level in range(1, depth):
-        capacity = branching ** (depth - 1 - level)
-        nxt = []
-        for g in groups:
-            lab = _split_with_capacity(leaf_pos[g], branching, capacity, rng) if len(g) > capacity else np.arange(len(g))
-            path[g, level - 1] = lab
-            nxt.extend(g[lab == j] for j in np.unique(lab))
-        groups = nxt
-    key = np.zeros(n_leaves, dtype=np.int64)
-    node_of_leaf, parents = [], [np.array([-1], dtype=np.int64)]
-    prev_nodes = np.zeros(n_leaves, dtype=np.int64)
-    node_of_leaf.append(prev_nodes)
-    for level in range(1, depth):
-        key = key * branching + path[:, level - 1]
-        used, nodes = np.unique(key, return_inverse=True)
-        first = np.zeros(len(used), dtype=np.int64)
-        first[nodes] = np.arange(n_leaves)
-        parents.append(prev_nodes[first])
-        node_of_leaf.append(nodes.astype(np.int64))
-        prev_nodes = nodes
-    return [n[leaf] for n in node_of_leaf], parents
 
 
 def _outside_band(vertices: np.ndarray, faces: np.ndarray, options: FitOptions) -> tuple[np.ndarray, np.ndarray, float]:
@@ -309,55 +198,146 @@ class _LeafFitter:
             step[act[~improved]] *= 0.5
         return c
 
-    def fit(self, leaf_of_face: np.ndarray, n_leaves: int) -> tuple[np.ndarray, np.ndarray]:
-        """First fit: centres (L, 3), radii (L,), mm, from candidates along each patch's inward normal."""
-        pts = self.vertices[node_vertex_groups(self.faces, leaf_of_face, n_leaves)]  # (L, M, 3)
+    def fit(self, leaf_of_face: np.ndarray, n_leaves: int, which: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """First fit of leaves `which` (default all): centres (w, 3), radii (w,), mm, from candidates
+        along each patch's inward normal, then a pattern search."""
+        which = np.arange(n_leaves) if which is None else np.asarray(which)
+        pts = self.vertices[node_vertex_groups(self.faces, leaf_of_face, n_leaves)[which]]  # (w, M, 3)
         c0, r0 = enclosing_spheres(pts, iterations=60)
         tri = self.vertices[self.faces]
         cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # area-weighted normals
-        n = np.stack([np.bincount(leaf_of_face, weights=cross[:, i], minlength=n_leaves) for i in range(3)], axis=1)
+        n = np.stack([np.bincount(leaf_of_face, weights=cross[:, i], minlength=n_leaves) for i in range(3)], axis=1)[which]
         n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
         t = np.asarray(self.options.depths)
         cand = c0[:, None, :] - (r0[:, None] * t[None, :])[:, :, None] * n[:, None, :]
         s, _ = self.score(pts, cand)
-        c = cand[np.arange(n_leaves), s.argmin(axis=1)]
+        c = cand[np.arange(len(which)), s.argmin(axis=1)]
         c = self.search(pts, c, 0.25 * r0)
         return c, radii_to_cover(pts, c)
 
-    def reassign(self, leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray, k: int = 12) -> np.ndarray:
+    def reassign(self, leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray) -> np.ndarray:
         """Give each face to the leaf, among those already holding all its vertices, where it sits deepest.
 
         A face moves only into a sphere that holds it, so coverage is kept, and the sphere it
         leaves may then shrink: the boundary faces that set a sphere's radius migrate away.
         """
         tri = self.vertices[self.faces]
-        k = min(k, len(r))
+        k = min(self.options.reassign_candidates, len(r))
         _, near = cKDTree(c).query(tri.mean(axis=1), k=k)
         near = np.concatenate([leaf_of_face[:, None], near.reshape(len(tri), -1)], axis=1)  # current first
         far = np.sqrt(((tri[:, None, :, :] - c[near][:, :, None, :]) ** 2).sum(axis=3).max(axis=2))
         rn = r[near]
-        slack = (rn - far) / np.maximum(rn, 1e-300)  # relative depth of the face inside each candidate
+        slack = rn - far  # depth of the face inside each candidate, mm
+        if self.options.relative_depth:
+            slack = slack / np.maximum(rn, 1e-300)
         slack[far > rn] = -np.inf
         return near[np.arange(len(tri)), slack.argmax(axis=1)]
 
 
-def fit_leaves(
-    vertices: np.ndarray, faces: np.ndarray, leaf_of_face: np.ndarray, n_leaves: int, options: FitOptions
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Leaf spheres with the least outside volume: centres (L, 3), radii (L,), mm, and (F,) leaf of each face."""
+def _face_geometry(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per face: centroid (F, 3) mm, outward unit normal (F, 3), area (F,) mm^2."""
+    tri = vertices[faces]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    return tri.mean(axis=1), cross / np.maximum(2 * area, 1e-300)[:, None], area
+
+
+def initial_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: FitOptions, rng) -> np.ndarray:
+    """(F,) leaf of each face, 0..L-1 (L <= n_leaves): k-means on medially pulled centroids."""
+    centroid, normal, _ = _face_geometry(vertices, faces)
+    if options.medial_pull:
+        # Estimated on a subsample of faces (a smooth field), spread to the rest by nearest face.
+        sub = rng.choice(len(faces), size=min(len(faces), options.medial_samples), replace=False)
+        rho_sub = medial_radii(centroid[sub], normal[sub], vertices, options.medial_cap_mm)
+        rho = rho_sub[cKDTree(centroid[sub]).query(centroid)[1]]
+        centroid = centroid - (options.medial_pull * np.minimum(rho, options.medial_cap_mm))[:, None] * normal
+    return _kmeans(centroid, n_leaves, options.lloyd_iterations, rng)
+
+
+def _compact(leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray):
+    """Drop leaves without faces and renumber the rest in order."""
+    keep = np.bincount(leaf_of_face, minlength=len(r)) > 0
+    return (np.cumsum(keep) - 1)[leaf_of_face], c[keep], r[keep]
+
+
+def _split_worst(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray, n_split: int, rng):
+    """Split the n_split leaves holding the most outside volume in two (2-means on face centroids)."""
+    n = len(r)
+    pts = fitter.vertices[node_vertex_groups(fitter.faces, leaf_of_face, n)]
+    score = fitter.score(pts, c[:, None, :])[0][:, 0]
+    counts = np.bincount(leaf_of_face, minlength=n)
+    score[counts < 2] = -np.inf
+    worst = np.argsort(score)[::-1][:n_split]
+    worst = worst[np.isfinite(score[worst])]
+    centroid = fitter.vertices[fitter.faces].mean(axis=1)
+    leaf_of_face = leaf_of_face.copy()
+    for j, w in enumerate(worst):
+        idx = np.flatnonzero(leaf_of_face == w)
+        half = _kmeans(centroid[idx], 2, 8, rng)
+        leaf_of_face[idx[half == 1]] = n + j
+    changed = np.concatenate([worst, n + np.arange(len(worst))])
+    c = np.concatenate([c, np.zeros((len(worst), 3))])
+    r = np.concatenate([r, np.zeros(len(worst))])
+    c[changed], r[changed] = fitter.fit(leaf_of_face, n + len(worst), changed)
+    return leaf_of_face, c, r
+
+
+def fit_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: FitOptions, rng):
+    """At most n_leaves leaf spheres with the least outside volume: (F,) leaf of each face,
+    centres (L, 3) mm, radii (L,) mm."""
     fitter = _LeafFitter(vertices, faces, options)
-    c, r = fitter.fit(leaf_of_face, n_leaves)
+    reserve = int(round(n_leaves * options.reserve)) if n_leaves >= 32 else 0
+    leaf = initial_leaves(vertices, faces, n_leaves - reserve, options, rng)
+    n = int(leaf.max()) + 1
+    c, r = fitter.fit(leaf, n)
     for _ in range(options.reassign_rounds):
-        leaf_of_face = fitter.reassign(leaf_of_face, c, r)
-        groups = node_vertex_groups(faces, leaf_of_face, n_leaves)
-        pts = vertices[groups]
-        # A leaf that gave away all its faces shrinks to a point; build_fit_tree drops it.
-        empty = groups[:, 0] < 0
-        pts[empty] = c[empty][:, None, :]
+        free = n_leaves - len(r)
+        if free > 0:
+            step = max(1, int(round(n_leaves * options.split_per_round)))
+            leaf, c, r = _split_worst(fitter, leaf, c, r, min(free, step), rng)
+        leaf = fitter.reassign(leaf, c, r)
+        leaf, c, r = _compact(leaf, c, r)
+        pts = vertices[node_vertex_groups(faces, leaf, len(r))]
+        c = fitter.search(pts, c, 0.1 * radii_to_cover(pts, c), options.refit_rounds)
         r = radii_to_cover(pts, c)
-        c = fitter.search(pts, c, 0.1 * r, options.refit_rounds)
-        r = radii_to_cover(pts, c)
-    return c, r, leaf_of_face
+    return leaf, c, r
+
+
+def group_leaves(positions: np.ndarray, branching: int, depth: int, rng) -> list[np.ndarray]:
+    """Parents of each level for leaves at `positions` (L, 3) mm, L <= branching**(depth-1).
+
+    Returns per level k (n_k,) parent indices into level k-1 (level 0: [-1]) and, last, the
+    permutation that orders the leaves by parent. Built top-down over the leaves with a capacity
+    (a node of level k may hold at most branching**(depth-1-k) leaves), so every node keeps at
+    most `branching` children.
+    """
+    n = len(positions)
+    path = np.zeros((n, max(depth - 1, 0)), dtype=np.int64)
+    groups = [np.arange(n)]
+    for level in range(1, depth):
+        capacity = branching ** (depth - 1 - level)
+        nxt = []
+        for g in groups:
+            lab = _split_with_capacity(positions[g], branching, capacity, rng) if len(g) > capacity else np.arange(len(g))
+            path[g, level - 1] = lab
+            nxt.extend(g[lab == j] for j in np.unique(lab))
+        groups = nxt
+    key = np.zeros(n, dtype=np.int64)
+    for level in range(1, depth):
+        key = key * branching + path[:, level - 1]
+    order = np.argsort(key, kind="stable")
+    path = path[order]
+    parents = [np.array([-1], dtype=np.int64)]
+    prev = np.zeros(n, dtype=np.int64)  # node of level-1 holding each (ordered) leaf
+    key = np.zeros(n, dtype=np.int64)
+    for level in range(1, depth):
+        key = key * branching + path[:, level - 1]
+        used, node = np.unique(key, return_inverse=True)
+        first = np.zeros(len(used), dtype=np.int64)
+        first[node[::-1]] = np.arange(n)[::-1]
+        parents.append(prev[first])
+        prev = node.astype(np.int64)
+    return parents + [order]
 
 
 def build_fit_tree(
@@ -365,31 +345,24 @@ def build_fit_tree(
 ) -> SphereTree:
     """Optimising sphere tree of a closed mesh ((n, 3) float64 mm, (m, 3) int): see the module text."""
     options = options or FitOptions()
+    rng = np.random.default_rng(options.seed)
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
-    node_of_face, parents = partition_faces(vertices, faces, branching, depth, options)
-    c, r, leaf = fit_leaves(vertices, faces, node_of_face[-1], len(parents[-1]), options)
-    # Faces may have moved to another leaf: drop emptied leaves, inner nodes follow their leaves.
-    keep = np.bincount(leaf, minlength=len(r)) > 0
-    renumber = np.cumsum(keep) - 1
-    node_of_face[-1] = renumber[leaf]
-    parents[-1] = parents[-1][keep]
-    c, r = c[keep], r[keep]
+    if depth == 1:
+        c, r = enclosing_spheres(vertices[None])
+        return SphereTree(branching, (c,), (r,), (np.array([-1], dtype=np.int64),), np.zeros(len(faces), np.int64), "fit")
+    leaf, c, r = fit_leaves(vertices, faces, branching ** (depth - 1), options, rng)
+    *parents, order = group_leaves(c, branching, depth, rng)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    node_of_face = [rank[leaf]]
+    centers, radii = [c[order]], [r[order]]
     for k in range(depth - 2, -1, -1):
-        node_of_face[k] = parents[k + 1][node_of_face[k + 1]]
-    for k in range(depth - 2, 0, -1):
-        # Inner nodes left without faces go too (their children are all gone).
-        keep = np.bincount(node_of_face[k], minlength=len(parents[k])) > 0
-        renumber = np.cumsum(keep) - 1
-        node_of_face[k] = renumber[node_of_face[k]]
-        parents[k + 1] = renumber[parents[k + 1]]
-        parents[k] = parents[k][keep]
-    centers, radii = [c], [r]
-    for k in range(depth - 2, -1, -1):
-        pts = vertices[node_vertex_groups(faces, node_of_face[k], len(parents[k]))]
-        c, r = enclosing_spheres(pts)
-        centers.insert(0, c)
-        radii.insert(0, r)
+        node_of_face.insert(0, parents[k + 1][node_of_face[0]])
+        pts = vertices[node_vertex_groups(faces, node_of_face[0], len(parents[k]))]
+        ck, rk = enclosing_spheres(pts)
+        centers.insert(0, ck)
+        radii.insert(0, rk)
     return SphereTree(
         branching=branching,
         centers=tuple(centers),
