@@ -18,7 +18,8 @@ from . import __version__
 from .errors import OrthosimError
 
 ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_CASE = ROOT / "cases" / "normal_occlusion.toml"
+DEFAULT_CASE = ROOT / "cases" / "case1_first_premolar_extraction.toml"
+DEMO_VIEWS = ("right_buccal", "maxillary_occlusal")
 
 
 def _size(ctx, param, value: str) -> tuple[int, int]:
@@ -82,6 +83,8 @@ def render_options(f):
     f = click.option("--gif", is_flag=True, help="Also write animation.gif.")(f)
     f = click.option("--alpha", is_flag=True, help="PNG frames with a transparent background.")(f)
     f = click.option("--hide-roots", is_flag=True, help="Draw crowns only.")(f)
+    f = click.option("--frames-per-step", default=6, show_default=True, type=click.IntRange(1, 120),
+                     help="Animation frames per simulation step (positions interpolated between steps).")(f)
     f = click.option("--contact-faces", is_flag=True,
                      help="Also colour the tooth surface inside each contact sphere (as in the paper's Figure 7).")(f)
     return f
@@ -104,7 +107,8 @@ def run(case: Path, out_dir: Path | None, detector: str | None, **render_opts) -
               help="Output folder.")
 @render_options
 def demo(out_dir: Path, **render_opts) -> None:
-    """Run the shipped default case into out/demo/."""
+    """Run the paper's case 1 (cases/case1_...) into out/demo/."""
+    render_opts["views"] = render_opts.get("views") or DEMO_VIEWS
     _run_case(DEFAULT_CASE, out_dir, None, render_opts)
 
 
@@ -182,27 +186,13 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
 def _render_steps(dent, records, extracted, out_dir: Path, opts: dict) -> dict:
     """Render every simulated step (one frame per step and view) into out_dir/frames."""
     from render.animation import render_run
-    from render.frame_state import FrameState
+    from render.timeline import frames_from_steps
 
-    frames = (FrameState.from_step(r, extracted) for r in records)
+    frames = frames_from_steps(records, frozenset(extracted), opts.get("frames_per_step", 1))
     return render_run(dent, frames, out_dir, views=opts.get("views") or ("frontal",), size=opts["size"],
                       gif=opts.get("gif", False), alpha=opts.get("alpha", False),
                       hide_roots=opts.get("hide_roots", False),
                       color_contact_faces=opts.get("contact_faces", False))
-
-
-def _render_initial(dent, poses, extracted, out_dir: Path, opts: dict) -> dict:
-    """Render the model as it stands (one frame per view) into out_dir/frames."""
-    from render.animation import render_run
-    from render.frame_state import FrameState
-
-    frames = [FrameState(poses=poses, extracted=frozenset(extracted))]
-    return render_run(dent, frames, out_dir, views=opts.get("views") or ("frontal",), size=opts["size"],
-                      gif=opts.get("gif", False), alpha=opts.get("alpha", False),
-                      hide_roots=opts.get("hide_roots", False),
-                      color_contact_faces=opts.get("contact_faces", False))
-
-
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
