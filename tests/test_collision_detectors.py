@@ -247,3 +247,19 @@ def test_asking_for_the_first_contact_only_never_delays_the_time_of_first_contac
     assert full.touching.any()
     assert np.array_equal(full.touching, first.touching)
     assert np.allclose(np.nan_to_num(full.time_of_first_contact, nan=2), np.nan_to_num(first.time_of_first_contact, nan=2))
+
+
+@pytest.mark.parametrize("turn", [0.0, 0.6])
+def test_continuous_contact_leaves_are_drawn_where_the_teeth_are_at_first_contact(turn):
+    a, b = crown_like_mesh(0), crown_like_mesh(1)
+    model = two_body_model(a, b)
+    start = translation([12, 0.5, 0])
+    end = translation([5, 0.5, 0])
+    end[:3, :3] = rotation_about_axis([0, 1, 0], turn)
+    res = detect_step(model, {2: start}, {2: end}, pairs=[(1, 2)], detector="continuous")
+    t = res.time_of_first_contact[0]
+    assert 0 < t < 1 and len(res.leaf_pairs) > 0
+    pose_b = interpolate_pose(start, end, t)
+    leaves_b = model.bodies[1].tree.leaf_centers[res.leaf_pairs[:, 1]]
+    expected = leaves_b @ pose_b[:3, :3].T + pose_b[:3, 3]
+    assert np.abs(res.centers_b - expected).max() <= 1e-3

@@ -25,13 +25,13 @@ from .time_of_contact import contact_interval, contact_interval_from_dots, min_d
 
 
 def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, pair_idx: np.ndarray, first_only: bool = False,
-                 world0: np.ndarray | None = None):
+                 world0: np.ndarray | None = None, world1: np.ndarray | None = None):
     """(pair, node a, node b, t, leave): leaf pairs that may touch in the step, Eq. 2's first time.
 
     poses0, poses1: (n, 4, 4) poses at t = 0 and t = 1 in model body order; pair_idx (p, 2).
     t: (m,) in [0, 1), never later than the first contact of the leaves' contents; leave: (m,)
-    when the (inflated) spheres stop overlapping along their chords. world0: the
-    `model.world_centers(poses0)` when the caller has it already.
+    when the (inflated) spheres stop overlapping along their chords. world0, world1:
+    `model.world_centers` of poses0, poses1 when the caller has them already.
 
     Every node is placed at both ends by two batched matrix products (arch frame). Node pairs are
     pruned with the swept-sphere bound: a node's chord lies in the sphere about its midpoint M of
@@ -40,7 +40,7 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
     pairs that pass get the exact closed-form test and Eq. 2 in float64.
     """
     W0 = model.world_centers(poses0) if world0 is None else world0  # [body][axis][j]
-    D = model.world_centers(poses1) - W0  # chord of every node centre
+    D = (model.world_centers(poses1) if world1 is None else world1) - W0  # chord of every node centre
     inflate = np.repeat(chord_deviation_bound(rotation_angle(poses0, poses1), 1.0), model.stride)
     R = model.radii + inflate * model.rho  # radius grown by the node centre's largest chord deviation
     X, Y, Z = model.axes((W0 + 0.5 * D).astype(np.float32))

@@ -23,6 +23,9 @@ from .model import CollisionModel
 from .motion import chord_deviation_bound, interpolate_poses, rotation_angle
 
 
+DRAW_TOLERANCE_MM = 1e-3  # leaf centres drawn on their chords when the true path strays less
+
+
 def default_pairs(model: CollisionModel, poses: np.ndarray | None = None, absent: Sequence[int] = (),
                   poses_end: np.ndarray | None = None) -> list[tuple[int, int]]:
     """The broad phase: arch neighbours and facing teeth when every body is an FDI tooth, else a
@@ -74,8 +77,8 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
         touching[pair] = True
         return StepResult("discrete", pairs_arr, touching, nan, **_leaf_arrays(model, pair_idx, pair, la, lb, P1, P1, W=W))
     # continuous
-    W0 = model.world_centers(P0)
-    pair, la, lb, t, leave = swept_leaves(model, P0, P1, pair_idx, first_only, world0=W0)
+    W0, W1 = model.world_centers(P0), model.world_centers(P1)
+    pair, la, lb, t, leave = swept_leaves(model, P0, P1, pair_idx, first_only, world0=W0, world1=W1)
     toc = np.full(p, np.inf)
     np.minimum.at(toc, pair, t)
     toc[np.isinf(toc)] = np.nan
@@ -90,15 +93,22 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
     pair, la, lb = pair[live], la[live], lb[live]
     touching = ~np.isnan(toc)
     leaves = _leaf_arrays(model, pair_idx, pair, la, lb, P0, P0, W=W0)
-    # pairs first touching after t = 0: their leaves drawn at the poses of that time
-    moved = np.flatnonzero(touching & (toc > 0))
+    # pairs first touching after t = 0: their leaves drawn where they are at that time: on their
+    # chords when those stray less than DRAW_TOLERANCE_MM from the true paths, else at the poses
+    sel = np.flatnonzero(toc[pair] > 0)
+    if len(sel):
+        ts = toc[pair[sel]][:, None]
+        for key, nodes in (("centers_a", la[sel]), ("centers_b", lb[sel])):
+            leaves[key][sel] = model.xyz(W0, nodes) + ts * (model.xyz(W1, nodes) - model.xyz(W0, nodes))
+    stray = chord_deviation_bound(rotation_angle(P0, P1), model.rho_max)  # (n,) mm per body
+    moved = np.flatnonzero(touching & (toc > 0) & (np.maximum(stray[pair_idx[:, 0]], stray[pair_idx[:, 1]]) > DRAW_TOLERANCE_MM))
     if len(moved):
         ia, ib = pair_idx[moved, 0], pair_idx[moved, 1]
         Ta = np.repeat(P0[:1], p, axis=0)
         Tb = Ta.copy()
         Ta[moved] = interpolate_poses(P0[ia], P1[ia], toc[moved])
         Tb[moved] = interpolate_poses(P0[ib], P1[ib], toc[moved])
-        sel = np.flatnonzero(toc[pair] > 0)
+        sel = np.flatnonzero(np.isin(pair, moved))
         redo = _leaf_arrays(model, pair_idx, pair[sel], la[sel], lb[sel], Ta, Tb, per_pair=True)
         leaves["centers_a"][sel] = redo["centers_a"]
         leaves["centers_b"][sel] = redo["centers_b"]
