@@ -12,9 +12,11 @@ medial axis holds both sides at once. So:
 2. Fit each leaf: candidate centres along the patch's inward normal, then a pattern search in 3D;
    the radius is always the distance to the farthest patch vertex, and the score is the number of
    voxels of an outside-the-tooth band that fall in the sphere (its outside volume).
-3. Improve: leaves emptied below refill by splitting the worst leaves in two, each triangle moves
-   to the leaf that holds it most deeply (it only moves into a sphere that already holds it, so coverage
-   stays exact, and the sphere it leaves can shrink), and the spheres are searched again.
+3. Improve, a few rounds: leaves emptied earlier refill by splitting the worst leaves in two;
+   each triangle moves to the leaf that holds it most deeply (only into a sphere that already
+   holds it, so the sphere it leaves can shrink); the triangles that set a leaf's radius are
+   handed to a neighbour that grows to take them when that lowers the outside volume; the
+   spheres are searched again. Every radius is recomputed from its patch, so coverage stays exact.
 4. Group the leaves top-down into nodes of at most `branching` children (k-means with capacity);
    each inner node is the near-minimal sphere around all vertices of its triangles, so it holds
    everything its children hold and a descent never loses a contact.
@@ -52,6 +54,7 @@ class FitOptions:
     depths: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0)  # x patch radius
     search_rounds: int = 8
     reassign_rounds: int = 3
+    handoff_rounds: int = 4  # per improve round: hand radius-setting triangles to growing neighbours
     reassign_candidates: int = 24  # leaves (nearest centres) a face may move to
     relative_depth: bool = True  # reassignment compares depth / radius (True) or depth in mm
     refit_rounds: int = 8  # pattern-search rounds after each reassignment
@@ -165,14 +168,70 @@ class _LeafFitter:
         near, far, self.voxel = _outside_band(vertices, faces, options)
         self.near, self.far = cKDTree(near), cKDTree(far)
 
+    def count(self, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+        """Outside volume of spheres, (n, 3) and (n,) mm, in fine voxels (the far tier counts 8 each)."""
+        cnt = self.near.query_ball_point(centres, radii, return_length=True)
+        return cnt + 8 * self.far.query_ball_point(centres, radii, return_length=True)
+
     def score(self, pts: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For padded patch points (L, M, 3) and centres (L, c, 3), mm: outside voxels held, radii (L, c)."""
         r = np.sqrt(((pts[:, None, :, :] - centres[:, :, None, :]) ** 2).sum(axis=3).max(axis=2))
-        flat_c, flat_r = centres.reshape(-1, 3), r.ravel()
-        cnt = self.near.query_ball_point(flat_c, flat_r, return_length=True).reshape(r.shape)
-        cnt = cnt + 8 * self.far.query_ball_point(flat_c, flat_r, return_length=True).reshape(r.shape)
+        cnt = self.count(centres.reshape(-1, 3), r.ravel()).reshape(r.shape)
         # Ties (e.g. no outside voxel at all) go to the smaller sphere.
         return cnt + r / (100 * r.max()), r
+
+    def handoff(self, leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray, k: int = 6) -> np.ndarray:
+        """Hand the triangles that set a leaf's radius to a neighbour that may grow, where that pays.
+
+        Leaf A's radius is set by its farthest vertex; giving the A-triangles at that vertex to a
+        nearby leaf B (which grows just enough to hold them) changes the outside volume by
+        [B grown - B] + [A shrunk - A]; the best negative change per A is taken, at most one move
+        into or out of each leaf per call, so the changes evaluated are the changes made.
+        """
+        n = len(r)
+        faces, vertices = self.faces, self.vertices
+        groups = node_vertex_groups(faces, leaf_of_face, n)
+        pts = vertices[groups]
+        far_vertex = groups[np.arange(n), np.sqrt(((pts - c[:, None, :]) ** 2).sum(axis=2)).argmax(axis=1)]
+        crit = np.any(faces == far_vertex[leaf_of_face][:, None], axis=1)
+        crit_count = np.bincount(leaf_of_face[crit], minlength=n)
+        movable = (crit_count > 0) & (crit_count < np.bincount(leaf_of_face, minlength=n))
+        # A without its critical triangles: the radius it could shrink to.
+        rest = np.where(crit, n, leaf_of_face)
+        rest_pts = vertices[node_vertex_groups(faces, rest, n + 1)[:n]]
+        r_shrunk = np.where(movable, radii_to_cover(rest_pts, c), r)
+        crit_pts = vertices[node_vertex_groups(faces, np.where(crit, leaf_of_face, n), n + 1)[:n]]  # (n, m, 3)
+        k = min(k + 1, n)
+        _, near = cKDTree(c).query(crit_pts.mean(axis=1), k=k)
+        near = near.reshape(n, -1)
+        need = np.sqrt(((crit_pts[:, None, :, :] - c[near][:, :, None, :]) ** 2).sum(axis=3).max(axis=2))
+        r_grown = np.maximum(r[near], need)
+        base = self.count(c, r)
+        gain_a = self.count(c, r_shrunk) - base  # <= 0
+        grown = self.count(c[near].reshape(-1, 3), r_grown.ravel()).reshape(near.shape) - base[near]
+        delta = grown + gain_a[:, None] + 1e-6 * (r_grown - r[near])
+        delta[near == np.arange(n)[:, None]] = np.inf
+        delta[~movable] = np.inf
+        best = delta.argmin(axis=1)
+        best_delta = delta[np.arange(n), best]
+        target = near[np.arange(n), best]
+        busy = np.zeros(n, dtype=bool)
+        moves = {}
+        for a in np.argsort(best_delta):
+            if not best_delta[a] < 0:
+                break
+            b = target[a]
+            if busy[a] or busy[b]:
+                continue
+            busy[a] = busy[b] = True
+            moves[a] = b
+        if not moves:
+            return leaf_of_face
+        dest = np.arange(n)
+        dest[list(moves)] = list(moves.values())
+        out = leaf_of_face.copy()
+        out[crit] = dest[leaf_of_face[crit]]
+        return out
 
     def search(self, pts: np.ndarray, c: np.ndarray, step: np.ndarray, rounds: int | None = None) -> np.ndarray:
         """Pattern search on the centres (L, 3) mm from `step` (L,) mm: move while the score drops.
@@ -297,6 +356,10 @@ def fit_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: 
             leaf, c, r = _split_worst(fitter, leaf, c, r, min(free, step), rng)
         leaf = fitter.reassign(leaf, c, r)
         leaf, c, r = _compact(leaf, c, r)
+        for _ in range(options.handoff_rounds):
+            pts = vertices[node_vertex_groups(faces, leaf, len(r))]
+            r = radii_to_cover(pts, c)
+            leaf = fitter.handoff(leaf, c, r)
         pts = vertices[node_vertex_groups(faces, leaf, len(r))]
         c = fitter.search(pts, c, 0.1 * radii_to_cover(pts, c), options.refit_rounds)
         r = radii_to_cover(pts, c)
