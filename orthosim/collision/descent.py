@@ -20,14 +20,6 @@ import numpy as np
 from .model import CollisionModel
 
 
-def _expand(model: CollisionModel, parent, other, count, pair):
-    """Entries (child of parent, other[, pair]) for every child of each parent."""
-    total = int(count.sum())
-    rep = np.repeat(np.arange(len(count)), count)
-    j = np.arange(total) - np.repeat(np.cumsum(count) - count, count)
-    return model.child_start[parent][rep] + j, other[rep], (pair[rep] if pair is not None else None)
-
-
 def descend(model: CollisionModel, pair_idx: np.ndarray, may_touch: Callable, at_leaves: Callable | None = None,
             first_only: bool = False, track_pair: bool = False):
     """Run the descent; returns (pair, leaf a, leaf b, payload) of every accepted leaf pair.
@@ -57,17 +49,20 @@ def descend(model: CollisionModel, pair_idx: np.ndarray, may_touch: Callable, at
 
     found = np.zeros(p, bool)
     out_pair, out_a, out_b, payloads = [], [], [], []
+    split_key, child_count, child_start = model.split_key, model.child_count, model.child_start
     while len(na):
         keep = np.flatnonzero(may_touch(pair, na, nb))
         na, nb = na[keep], nb[keep]
         if track_pair:
             pair = pair[keep]
-        sa, sb = model.split_key[na], model.split_key[nb]  # radius of inner nodes, -1 at leaves
-        leaf = (sa < 0) & (sb < 0)
-        if leaf.any():
-            li = np.flatnonzero(leaf)
-            la, lb = na[li], nb[li]
-            lp = pair[li] if track_pair else None
+        sa, sb = split_key[na], split_key[nb]  # radius of inner nodes, -1 at leaves
+        split_a = sa >= sb  # descend the larger sphere; a leaf (-1) is never split
+        parent = np.where(split_a, na, nb)
+        count = child_count[parent]  # 0 exactly for leaf-leaf pairs
+        leaf = np.flatnonzero(count == 0)
+        if len(leaf):
+            la, lb = na[leaf], nb[leaf]
+            lp = pair[leaf] if track_pair else None
             if at_leaves is not None:
                 ok, payload = at_leaves(lp, la, lb)
                 la, lb = la[ok], lb[ok]
@@ -77,23 +72,18 @@ def descend(model: CollisionModel, pair_idx: np.ndarray, may_touch: Callable, at
             out_pair.append(lp)
             out_a.append(la)
             out_b.append(lb)
-            found[lp] = True
-            inner = ~leaf
             if first_only:
-                inner &= ~found[pair if track_pair else pair_of(na, nb)]
-            ii = np.flatnonzero(inner)
-            na, nb, sa, sb = na[ii], nb[ii], sa[ii], sb[ii]
-            if track_pair:
-                pair = pair[ii]
-        split_a = sa >= sb  # descend the larger sphere; a leaf (-1) is never split
-        ia, ib = np.flatnonzero(split_a), np.flatnonzero(~split_a)
-        pa_, pb_ = na[ia], nb[ib]
-        ca, oa, pa = _expand(model, pa_, nb[ia], model.child_count[pa_], pair[ia] if track_pair else None)
-        cb, ob, pb = _expand(model, pb_, na[ib], model.child_count[pb_], pair[ib] if track_pair else None)
-        na = np.concatenate([ca, ob])
-        nb = np.concatenate([oa, cb])
+                found[lp] = True
+                count[found[pair if track_pair else pair_of(na, nb)]] = 0
+        # every kept node pair becomes (child of the split node, the other node), children contiguous
+        total = int(count.sum())
+        rep = np.repeat(np.arange(len(count)), count)
+        child = child_start[parent][rep] + (np.arange(total) - np.repeat(np.cumsum(count) - count, count))
+        other = np.where(split_a, nb, na)[rep]
+        side = split_a[rep]
+        na, nb = np.where(side, child, other), np.where(side, other, child)
         if track_pair:
-            pair = np.concatenate([pa, pb])
+            pair = pair[rep]
     if not out_pair:
         empty = np.zeros(0, np.int64)
         return empty, empty, empty, {}
