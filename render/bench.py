@@ -289,10 +289,14 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
 
     # ---- memory over a long run (same renderer and scene: what a real run does)
     mem_before_long = rss_mb()
+    mem_settled = mem_before_long
+    settle = max(1, memory_frames // 10)  # allocator pools fill during the first frames
     t0 = time.perf_counter()
     for i in range(memory_frames):
         scene.update(synthetic(i))
-        renderer.render(scene, "frontal")
+        renderer.render(scene, ("frontal", "left_buccal")[i % 2])  # two views: two cached images
+        if i == settle - 1:
+            mem_settled = rss_mb()
     long_fps = memory_frames / (time.perf_counter() - t0) if memory_frames else None
     mem_end = rss_mb()
     renderer.close()
@@ -337,7 +341,9 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         "collision": collision,
         "pending": pending,
         "render_variants": variants,
-        "memory_mb": {"start": mem_start, "before_long_run": mem_before_long, "end": mem_end,
+        "memory_mb": {"start": mem_start, "before_long_run": mem_before_long,
+                      f"after_{settle}_frames": mem_settled, "end": mem_end,
+                      "growth_after_settling": mem_end - mem_settled,
                       "long_run_frames": memory_frames, "long_run_fps": long_fps},
         "wall_s": time.perf_counter() - t_start,
     }
