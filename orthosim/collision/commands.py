@@ -87,14 +87,17 @@ def bench(out_file: Path | None, resolution: str, repeats: int, trees: str) -> N
 @collide.command()
 @click.option("--detector", type=click.Choice(DETECTORS), default="discrete", show_default=True)
 @click.option("--resolution", type=click.Choice(["coarse", "smooth"]), default="coarse", show_default=True)
-def step(detector: str, resolution: str) -> None:
+@click.option("--trees", type=click.Choice(["fit", "octree"]), default="fit", show_default=True,
+              help="Sphere-tree builder method (trees are cached on disk).")
+def step(detector: str, resolution: str, trees: str) -> None:
     """One whole-arch query on the parametric model at rest: which teeth touch."""
     from ..parametric import parametric_dentition
+    from ..spheretree.cache import cached_sphere_tree
     from .detect import detect_step
     from .model import CollisionModel
 
     d = parametric_dentition(resolution=resolution)
-    model = CollisionModel.from_dentition(d)
+    model = CollisionModel.from_dentition(d, tree_builder=lambda mesh: cached_sphere_tree(mesh, method=trees))
     poses = d.rest_poses()
     res = detect_step(model, poses, poses, detector=detector, request=CollisionRequest())
     click.echo(json.dumps({"detector": detector, "candidate_pairs": len(res.pairs),
