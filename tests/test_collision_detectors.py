@@ -234,6 +234,8 @@ def test_asking_for_an_unknown_detector_or_tooth_names_the_fix(parametric):
         detect_step(model, d.rest_poses(), detector="octree")
     with pytest.raises(CollisionError, match="tooth 18"):
         detect_step(model, d.rest_poses(), pairs=[(17, 18)])
+    with pytest.raises(CollisionError, match="itself"):
+        detect_step(model, d.rest_poses(), pairs=[(16, 16)])
 
 
 def test_asking_for_the_first_contact_only_never_delays_the_time_of_first_contact(parametric):

@@ -154,6 +154,10 @@ class CollisionModel:
     def pair_indices(self, pairs) -> np.ndarray:
         """(p, 2) body indices of (p, 2) keys."""
         pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+        same = pairs[:, 0] == pairs[:, 1]
+        if same.any():
+            raise CollisionError(None, f"pair ({pairs[same][0, 0]}, {pairs[same][0, 0]})", "pairs a tooth with itself",
+                                 "list pairs of two different teeth")
         return np.array([[self._idx(a), self._idx(b)] for a, b in pairs], dtype=np.int64).reshape(-1, 2)
 
     def pose_array(self, poses: Mapping[int, np.ndarray], keys=None) -> np.ndarray:
