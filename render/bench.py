@@ -12,7 +12,9 @@ machine does not move the figure; the end-to-end records also give frames / tota
     thread (`animation.prefetch`) while this one updates the scene, renders, reads back, and
     encodes (MP4 always, PNG frames unless disabled) on the background encoders of
     `animation.FrameSink`, whose bounded queues make the loop wait for them;
-    `end_to_end_synthetic` is the same with `SyntheticMotion` instead of the simulation;
+    `end_to_end_synthetic` is the same with `SyntheticMotion` instead of the simulation, and
+    `end_to_end_interpolated` the same with `frames_per_step` frames per simulation step (poses
+    interpolated between steps, `render.timeline`), which is what `orthosim run` writes;
   - render_variants: the same render with each optimisation undone in turn, measured
     round-robin in the same run so that the ratios stand even when the absolute figures wander
     with the machine's load;
@@ -172,7 +174,7 @@ def _simulation(case_obj, dentition, detector: str):
 def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool = True, detector: str = "continuous",
               frames: int = 300, warmup: int = 30, size=(640, 480), n_markers: int = 2000, memory_frames: int = 2000,
               variant_rounds: int = 4, collision_repeats: int = 20, work_dir: str | Path | None = None,
-              png: bool = True) -> dict:
+              png: bool = True, frames_per_step: int = 6) -> dict:
     """Measure and return the bench record (see the module docstring and the output contract).
 
     The model is `dentition` when given (then nothing is simulated), else the case's (default:
@@ -221,10 +223,10 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         if i >= warmup:
             render_times.append(time.perf_counter() - t0)
 
-    def end_to_end(state_iter) -> dict:
+    def end_to_end(state_iter, warm: int = warmup) -> dict:
         """Frame-to-frame wall time of the pipeline `render_run` uses: states produced one ahead
         on a thread (`prefetch`), scene update, render, read back, encode on the sink's threads."""
-        times, markers = [], []
+        times, markers, moving = [], [], []
         tmp_ctx = tempfile.TemporaryDirectory(prefix="orthosim-bench-") if work_dir is None else None
         out_dir = Path(work_dir) if work_dir is not None else Path(tmp_ctx.name)
         sink = FrameSink(out_dir, png=png, mp4=True)
@@ -233,11 +235,12 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
             scene.update(st)
             sink.add(renderer.render(scene, "frontal"))
             now = time.perf_counter()
-            if i >= warmup:
+            if i >= warm:
                 times.append(now - t_prev)
                 markers.append(st.n_contacts)
+                moving.append(len(st.moving))
             t_prev = now
-            if i == warmup - 1:
+            if i == warm - 1:
                 t_loop = now
         sink.close()
         overall = frames / (time.perf_counter() - t_loop)  # includes draining the encoders
@@ -246,7 +249,10 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         if tmp_ctx is not None:
             tmp_ctx.cleanup()
         return {"fps": _median_fps(times), "fps_overall_including_encoder_drain": overall, "mp4_bytes": mp4_bytes,
-                "markers_per_frame": {"median": float(np.median(markers)), "max": int(max(markers))}}
+                "markers_per_frame": {"median": float(np.median(markers)), "max": int(max(markers))},
+                # share of the measured frames in which some tooth moved: a case that has come to
+                # rest draws (cheaply) the same teeth again, so read the fps with this beside it
+                "frames_with_moving_teeth": float(np.mean([m > 0 for m in moving]))}
 
     encode = ["MP4 encode (libx264 ultrafast)"] + (["PNG frames (render.png)"] if png else [])
     e2e_synthetic = end_to_end(synthetic(i) for i in range(n_states))
@@ -256,6 +262,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     pending: dict[str, str] = {}
     fps_sim = None
     e2e_sim = None
+    e2e_interp = None
     collision = None
     if case_obj is not None and simulate:
         sim, why = _simulation(case_obj, dentition, detector)
@@ -276,6 +283,20 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
                                  for rec in run(movement_model, detector, steps=n_states - 1))
             e2e_sim["includes"] = [f"simulation step (orthosim.movement, {detector} detector)", "scene update", "draw",
                                    "colour read-back", *encode]
+            if frames_per_step > 1:
+                # what `orthosim run` does by default: frames interpolated between steps
+                import itertools
+
+                from .timeline import frames_from_steps
+
+                # warm up over the same simulation steps as the other figures (a case's first steps,
+                # where collisions are resolved, are much slower than the rest)
+                warm = 1 + (warmup - 1) * frames_per_step
+                steps = frames_from_steps(run(movement_model, detector, steps=n_states), extracted, frames_per_step)
+                e2e_interp = end_to_end(itertools.islice(steps, warm + frames), warm=warm)
+                e2e_interp["frames_per_step"] = frames_per_step
+                e2e_interp["includes"] = [f"one simulation step per {frames_per_step} frames, poses interpolated "
+                                          "between steps (render.timeline, as `orthosim run`)", *e2e_sim["includes"][1:]]
             try:
                 from orthosim.collision.bench import collision_timings
 
@@ -335,6 +356,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         },
         "end_to_end": e2e,
         "end_to_end_synthetic": e2e_synthetic,
+        "end_to_end_interpolated": e2e_interp,
         "collision_us_per_step": None if collision is None else collision.get("collision_us_per_step"),
         "collision_fps": None if collision is None else {
             k: (1e6 / v if v else None) for k, v in collision.get("collision_us_per_step", {}).items()},
