@@ -26,7 +26,7 @@ All coordinates in mm, in the mesh's frame.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -41,12 +41,12 @@ from .tree import SphereTree
 class FitOptions:
     """Knobs of the optimising builder (defaults tuned on the parametric and real teeth)."""
 
-    medial_pull: float = 0.8  # k-means on x - medial_pull * rho(x) * n(x): 0 surface, 1 medial centres
+    medial_pull: float = 0.6  # k-means on x - medial_pull * rho(x) * n(x): 0 surface, 1 medial centres
+    medial_pulls: tuple[float, ...] = (0.6, 0.8)  # pulls tried by fit_leaves (the best first fit wins)
     medial_cap_mm: float = 4.0  # rho capped at this depth, mm
     medial_samples: int = 4000  # faces on which rho is estimated
     lloyd_iterations: int = 12
-    reserve: float = 0.0  # share of the leaves first kept back, then spent on splitting the worst
-    split_per_round: float = 1 / 64  # share of the leaves split (worst first) in each improve round
+    reserve: float = 0.0  # share of the leaves first kept back, then spent on splitting the worst ones
     voxel_mm: float = 0.15  # spacing of the outside-band voxels that score spheres, mm
     max_voxels: int = 4_000_000  # the spacing grows on huge meshes to keep the grid this small
     band_mm: float = 0.75  # thickness of the outside band that scores spheres, mm
@@ -346,14 +346,20 @@ def fit_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: 
     centres (L, 3) mm, radii (L,) mm."""
     fitter = _LeafFitter(vertices, faces, options)
     reserve = int(round(n_leaves * options.reserve)) if n_leaves >= 32 else 0
-    leaf = initial_leaves(vertices, faces, n_leaves - reserve, options, rng)
-    n = int(leaf.max()) + 1
-    c, r = fitter.fit(leaf, n)
+    # The best pull toward the medial axis depends on the tooth (thin incisors, thick molars):
+    # fit each candidate pull once and improve only the partition with the least outside volume.
+    best = None
+    for pull in options.medial_pulls:
+        leaf = initial_leaves(vertices, faces, n_leaves - reserve, replace(options, medial_pull=pull), rng)
+        n = int(leaf.max()) + 1
+        c, r = fitter.fit(leaf, n)
+        total = float(fitter.count(c, r).sum())
+        if best is None or total < best[0]:
+            best = (total, leaf, c, r)
+    _, leaf, c, r = best
     for _ in range(options.reassign_rounds):
-        free = n_leaves - len(r)
-        if free > 0:
-            step = max(1, int(round(n_leaves * options.split_per_round)))
-            leaf, c, r = _split_worst(fitter, leaf, c, r, min(free, step), rng)
+        if len(r) < n_leaves:
+            leaf, c, r = _split_worst(fitter, leaf, c, r, n_leaves - len(r), rng)
         leaf = fitter.reassign(leaf, c, r)
         leaf, c, r = _compact(leaf, c, r)
         for _ in range(options.handoff_rounds):
@@ -363,6 +369,10 @@ def fit_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: 
         pts = vertices[node_vertex_groups(faces, leaf, len(r))]
         c = fitter.search(pts, c, 0.1 * radii_to_cover(pts, c), options.refit_rounds)
         r = radii_to_cover(pts, c)
+    if len(r) < n_leaves:
+        # Slots the last reassignment freed go to the worst leaves: more spheres, less outside.
+        leaf, c, r = _split_worst(fitter, leaf, c, r, n_leaves - len(r), rng)
+        leaf, c, r = _compact(leaf, c, r)
     return leaf, c, r
 
 
