@@ -20,7 +20,7 @@ import numpy as np
 from . import exact
 from .descent import descend
 from .model import FLOAT32_MARGIN_MM, CollisionModel
-from .motion import chord_deviation_bound, interpolate_pose, max_speed, rotation_angle
+from .motion import chord_deviation_bound, interpolate_pose, max_speed, relative_speed_bound, rotation_angle
 from .time_of_contact import contact_interval, contact_interval_from_dots, min_distance_over_step
 
 
@@ -127,7 +127,10 @@ def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, 
     None when conservative advancement proves the meshes stay apart until t = 1.
     """
     oa, ob = model.fcl_object(i_a), model.fcl_object(i_b)
-    mu = max_speed(T0a, T1a, model.rho_max[i_a]) + max_speed(T0b, T1b, model.rho_max[i_b])
+    # Strides use the bound on how fast the gap can close (relative motion); the tolerance is
+    # travel of the teeth themselves, so teeth moving together are still stopped precisely.
+    mu = relative_speed_bound(T0a, T1a, model.rho_max[i_a], T0b, T1b, model.rho_max[i_b])
+    travel = max_speed(T0a, T1a, model.rho_max[i_a]) + max_speed(T0b, T1b, model.rho_max[i_b])
 
     def at(t):
         exact.set_pose(oa, interpolate_pose(T0a, T1a, t))
@@ -144,8 +147,10 @@ def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, 
         d = exact.distance(oa, ob)
         if d <= 0.0:
             return t
+        if t + d / mu >= 1.0:  # the gap cannot close within the step: no contact, by the speed bound
+            return None
         if d <= tolerance:
-            t_probe = t + tolerance / mu
+            t_probe = t + tolerance / travel
             if t_probe >= 1.0:
                 return t  # contact, if any, lies within tolerance of travel: report conservatively
             at(t_probe)

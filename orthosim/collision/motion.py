@@ -106,6 +106,20 @@ def max_speed(T0: np.ndarray, T1: np.ndarray, rho_max: float) -> float:
     return float(np.linalg.norm(np.asarray(T1)[:3, 3] - np.asarray(T0)[:3, 3]) + theta * rho_max)
 
 
+def relative_speed_bound(T0a: np.ndarray, T1a: np.ndarray, rho_a: float,
+                         T0b: np.ndarray, T1b: np.ndarray, rho_b: float) -> float:
+    """mm per unit step time: bound on how fast the distance between two moving bodies can shrink.
+
+    A point of body a moves at v_a + w_a x r (v_a its origin's constant velocity, |w_a| = theta_a,
+    |r| <= rho_a), likewise for b, so any two points approach at most at
+    |v_a - v_b| + theta_a rho_a + theta_b rho_b. Unlike the sum of the two bodies' own speeds, this
+    is near zero for teeth translating together, so conservative advancement takes full strides
+    instead of crawling.
+    """
+    dv = (np.asarray(T1a)[:3, 3] - np.asarray(T0a)[:3, 3]) - (np.asarray(T1b)[:3, 3] - np.asarray(T0b)[:3, 3])
+    return float(np.linalg.norm(dv) + rotation_angle(T0a, T1a) * rho_a + rotation_angle(T0b, T1b) * rho_b)
+
+
 def interpolate_poses(T0: np.ndarray, T1: np.ndarray, t: np.ndarray) -> np.ndarray:
     """(m, 4, 4) poses of m bodies, each at its own time t (m,), stepping from T0 to T1 (m, 4, 4)."""
     T0 = np.asarray(T0, float)
