@@ -52,3 +52,23 @@ def test_no_point_of_a_turning_tooth_strays_from_its_chord_beyond_the_bound(seed
     chord = X[0] + ts[:, None] * (X[-1] - X[0])
     deviation = np.linalg.norm(X - chord, axis=1).max()
     assert deviation <= chord_deviation_bound(rotation_angle(T0, T1), np.linalg.norm(x)) + 1e-9
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_no_two_points_of_two_moving_teeth_approach_faster_than_the_relative_speed_bound(seed):
+    from orthosim.collision.motion import relative_speed_bound
+
+    rng = np.random.default_rng(seed)
+    ends = []
+    for _ in range(2):
+        R0 = Rotation.random(random_state=rng).as_matrix()
+        R1 = rotation_about_axis(rng.normal(size=3), rng.uniform(0, np.pi)) @ R0
+        ends.append((pose(R0, rng.normal(size=3) * 5), pose(R1, rng.normal(size=3) * 5)))
+    (A0, A1), (B0, B1) = ends
+    xa, xb = rng.normal(size=3) * 5, rng.normal(size=3) * 5
+    bound = relative_speed_bound(A0, A1, np.linalg.norm(xa), B0, B1, np.linalg.norm(xb))
+    ts = np.linspace(0, 1, 401)
+    Pa, Pb = interpolate_pose(A0, A1, ts), interpolate_pose(B0, B1, ts)
+    gap = np.linalg.norm((Pa[:, :3, :3] @ xa + Pa[:, :3, 3]) - (Pb[:, :3, :3] @ xb + Pb[:, :3, 3]), axis=1)
+    assert np.all(np.abs(np.diff(gap)) <= bound * np.diff(ts) + 1e-9)
