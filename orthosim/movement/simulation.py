@@ -323,8 +323,12 @@ def _vertical_mover(m: Motion | None, point: np.ndarray, dt: float) -> bool:
     return abs(d[1]) > 0.5 * np.hypot(d[0], d[2])
 
 
-def _touching(model: MovementModel, detector: str, P: dict[int, np.ndarray]):
-    """Pairs in contact at poses P with the detector's notion of contact, and the leaves to draw."""
+def _touching(model: MovementModel, detector: str, P: dict[int, np.ndarray], memo: dict | None = None):
+    """Pairs in contact at poses P with the detector's notion of contact, and the leaves to draw.
+
+    memo: optional {(a, b): (pose a, pose b, exact distance)} kept across steps: a pair neither of
+    whose teeth has moved keeps its exact distance without a new FCL query.
+    """
     s = model.settings
     pairs = list(model.pairs)
     empty = (np.zeros((0, 3)), np.zeros(0))
@@ -336,7 +340,7 @@ def _touching(model: MovementModel, detector: str, P: dict[int, np.ndarray]):
     res = detect_step(model.collision, P, None, pairs, "discrete", CollisionRequest(all_leaf_pairs=True))
     touching = res.touching_pairs()
     if detector == "continuous":
-        touching = [p for p in touching if _exact_distance(model, P, p) <= s.touch_tolerance_mm]
+        touching = [p for p in touching if _memo_exact_distance(model, P, p, memo) <= s.touch_tolerance_mm]
     keep = np.isin(res.pair_of_leaf, [i for i, p in enumerate(map(tuple, res.pairs.tolist())) if p in set(touching)])
     centers = np.concatenate([res.centers_a[keep], res.centers_b[keep]])
     radii = np.concatenate([res.radii_a[keep], res.radii_b[keep]])
@@ -353,6 +357,19 @@ def _fcl_pair(model: MovementModel, P, pair):
 
 def _exact_distance(model: MovementModel, P, pair) -> float:
     return exact.distance(*_fcl_pair(model, P, pair))
+
+
+def _memo_exact_distance(model: MovementModel, P, pair, memo: dict | None) -> float:
+    """`_exact_distance`, reused from `memo` while neither tooth of the pair has moved."""
+    a, b = pair
+    if memo is not None and pair in memo:
+        Ta, Tb, d = memo[pair]
+        if np.array_equal(Ta, P[a]) and np.array_equal(Tb, P[b]):
+            return d
+    d = _exact_distance(model, P, pair)
+    if memo is not None:
+        memo[pair] = (P[a].copy(), P[b].copy(), d)
+    return d
 
 
 def penetrations(model: MovementModel, P: Mapping[int, np.ndarray], known: dict | None = None) -> dict[tuple[int, int], float]:
@@ -417,7 +434,8 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
     dt = float(model.case.step_days)
     n_steps = model.case.steps if steps is None else int(steps)
     P = {n: np.asarray(T, float).copy() for n, T in model.dentition.rest_poses().items()}
-    touching, leaves = _touching(model, detector, P)
+    distance_memo: dict = {}
+    touching, leaves = _touching(model, detector, P, distance_memo)
     dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
     depth_memo: dict = {}
     initial_depths = penetrations(model, P, depth_memo)
@@ -517,7 +535,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
         P = P1
         # 4. contacts, interpenetration, distances
         before = touching_set
-        touching, leaves = _touching(model, detector, P)
+        touching, leaves = _touching(model, detector, P, distance_memo)
         # a moving tooth that made a new contact without a reported hit (it stopped within the
         # touching tolerance) has collided too; teeth sliding over the other arch's have not
         seen = {e.pair for e in events}
