@@ -158,7 +158,14 @@ class CollisionModel:
         if same.any():
             raise CollisionError(None, f"pair ({pairs[same][0, 0]}, {pairs[same][0, 0]})", "pairs a tooth with itself",
                                  "list pairs of two different teeth")
-        return np.array([[self._idx(a), self._idx(b)] for a, b in pairs], dtype=np.int64).reshape(-1, 2)
+        keys = np.array([b.key for b in self.bodies], dtype=np.int64)
+        order = np.argsort(keys)
+        pos = np.clip(np.searchsorted(keys[order], pairs), 0, len(keys) - 1)
+        idx = order[pos]
+        missing = keys[idx] != pairs
+        if missing.any():
+            self._idx(int(pairs[missing][0]))  # raises, naming the tooth
+        return idx.astype(np.int64).reshape(-1, 2)
 
     def pose_array(self, poses: Mapping[int, np.ndarray], keys=None) -> np.ndarray:
         """(n_bodies, 4, 4) poses in body order; bodies missing from `poses` keep their rest pose."""
