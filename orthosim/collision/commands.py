@@ -67,8 +67,13 @@ def _headline(report: dict) -> dict:
 @click.option("--repeats", type=click.IntRange(1), default=50, show_default=True)
 @click.option("--trees", type=click.Choice(["fit", "octree"]), default="fit", show_default=True,
               help="Sphere-tree builder method (trees are cached on disk).")
-def bench(out_file: Path | None, resolution: str, repeats: int, trees: str) -> None:
+@click.option("--keep-freed-memory", is_flag=True, help="Tune glibc to keep freed memory (see collision.memory).")
+def bench(out_file: Path | None, resolution: str, repeats: int, trees: str, keep_freed_memory: bool) -> None:
     """Microseconds per whole-arch step of every detector and of python-fcl, same pairs, one run."""
+    if keep_freed_memory:
+        from .memory import keep_freed_memory as keep
+
+        keep()
     from ..parametric import parametric_dentition
     from ..spheretree.cache import cached_sphere_tree
     from .bench import collision_timings
@@ -76,6 +81,7 @@ def bench(out_file: Path | None, resolution: str, repeats: int, trees: str) -> N
     res = collision_timings(parametric_dentition(resolution=resolution), repeats=repeats,
                             tree_builder=lambda mesh: cached_sphere_tree(mesh, method=trees))
     res["model"] = f"parametric {resolution}, {trees} sphere trees (8 x 4 levels)"
+    res["keep_freed_memory"] = keep_freed_memory
     text = json.dumps(res, indent=1)
     click.echo(text)
     if out_file is not None:
