@@ -7,7 +7,8 @@ Modules: `contract` (request and result types), `model` (what never changes), `b
 (which pairs to test), `circles` (detector 1), `discrete` (detector 2), `continuous` (detector 3),
 `descent` (the shared vectorised tree descent), `time_of_contact` (Eq. 2 and step bounds),
 `motion` (pose interpolation in a step), `exact` (python-fcl reference), `detect` (the entry
-point), `bench` (timings), `validate` (accuracy studies).
+point), `bench` (timings), `validate` (accuracy studies), `memory` (a process-wide allocator
+setting worth making at the CLI entry), `commands` (`orthosim collide ...`).
 """
 
 from .broadphase import arch_neighbour_pairs, candidate_pairs, facing_pairs, sweep_and_prune
