@@ -28,7 +28,7 @@ from . import fdi as F
 from .anatomy import dimensions
 from .archform import BetaArch, arch_with_half_length
 from .dentition import Dentition
-from .meshquery import MeshQuery
+from .collision.exact import MeshQuery
 from .occlusion import molar_relation, overjet
 from .tooth import CROWN, Tooth, part_of_faces
 from .toothshape import build_tooth_shape

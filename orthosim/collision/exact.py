@@ -69,3 +69,26 @@ def penetration_depth(mesh_a: trimesh.Trimesh, pose_a: np.ndarray, mesh_b: trime
             sd = trimesh.proximity.signed_distance(m2, v[near])  # positive inside
             worst = max(worst, float(sd.max(initial=0.0)))
     return worst
+
+
+class MeshQuery:
+    """Exact queries between any two of a set of meshes under any poses, FCL objects built once.
+
+    Used where the model itself must be exact rather than fast: placing parametric teeth so that
+    neighbours just touch, and checking a model in tests.
+    """
+
+    def __init__(self, meshes: dict[int, trimesh.Trimesh]):
+        self._objects = {key: fcl_object(mesh) for key, mesh in meshes.items()}
+
+    def _placed(self, key: int, pose: np.ndarray) -> fcl.CollisionObject:
+        obj = self._objects[key]
+        set_pose(obj, pose)
+        return obj
+
+    def intersects(self, a: int, pose_a: np.ndarray, b: int, pose_b: np.ndarray) -> bool:
+        return collide(self._placed(a, pose_a), self._placed(b, pose_b))[0]
+
+    def distance(self, a: int, pose_a: np.ndarray, b: int, pose_b: np.ndarray) -> float:
+        """mm between the surfaces; 0.0 when they intersect."""
+        return distance(self._placed(a, pose_a), self._placed(b, pose_b))
