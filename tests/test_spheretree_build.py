@@ -99,3 +99,13 @@ def test_bad_requests_name_the_option():
         build_sphere_tree(mesh, method="medial")
     with pytest.raises(SphereTreeError, match="depth"):
         build_sphere_tree(mesh, method="fit", depth=0)
+
+
+@pytest.mark.parametrize("method", ["fit", "octree"])
+def test_meshes_with_fewer_triangles_than_leaves_keep_the_branching(method):
+    """A 12-triangle box asked for depth 4: every triangle its own leaf, still at most 8 children."""
+    mesh = trimesh.creation.box((2.0, 3.0, 4.0))
+    tree = build_sphere_tree(mesh, method=method, depth=4)
+    assert tree.depth == 4
+    tree.validate(mesh.vertices, mesh.faces)
+    assert_conservative(tree, mesh)

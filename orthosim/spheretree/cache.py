@@ -25,7 +25,7 @@ from ..atomic import atomic_path
 from .build import build_sphere_tree, check_request, mesh_arrays
 from .tree import SphereTree
 
-BUILDER_VERSION = 4
+BUILDER_VERSION = 5
 
 
 def default_cache_dir() -> Path:

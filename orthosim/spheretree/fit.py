@@ -328,6 +328,8 @@ def _split_worst(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray,
     score[counts < 2] = -np.inf
     worst = np.argsort(score)[::-1][:n_split]
     worst = worst[np.isfinite(score[worst])]
+    if not len(worst):  # every leaf is a single triangle already
+        return leaf_of_face, c, r
     centroid = fitter.vertices[fitter.faces].mean(axis=1)
     leaf_of_face = leaf_of_face.copy()
     for j, w in enumerate(worst):
@@ -391,7 +393,7 @@ def group_leaves(positions: np.ndarray, branching: int, depth: int, rng) -> list
         capacity = branching ** (depth - 1 - level)
         nxt = []
         for g in groups:
-            lab = _split_with_capacity(positions[g], branching, capacity, rng) if len(g) > capacity else np.arange(len(g))
+            lab = _split_with_capacity(positions[g], branching, capacity, rng) if len(g) > 1 else np.zeros(1, np.int64)
             path[g, level - 1] = lab
             nxt.extend(g[lab == j] for j in np.unique(lab))
         groups = nxt
