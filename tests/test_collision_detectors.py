@@ -188,7 +188,7 @@ def test_a_step_without_motion_is_the_discrete_test_at_time_zero(parametric):
 
 # --- bounding circles -----------------------------------------------------------------------------
 
-def test_bounding_circles_bound_each_tooths_projection_on_the_occlusal_plane(parametric):
+def test_bounding_circles_bound_each_crowns_projection_on_the_occlusal_plane(parametric):
     d, model = parametric
     rng = np.random.default_rng(5)
     poses = {}
@@ -199,8 +199,14 @@ def test_bounding_circles_bound_each_tooths_projection_on_the_occlusal_plane(par
     P = model.pose_array(poses)
     c, r = bounding_circles(model, P)
     for i, body in enumerate(model.bodies):
-        v = body.mesh.vertices @ P[i, :3, :3].T + P[i, :3, 3]
+        assert body.circle_points is not None  # the paper's circles ignore the roots
+        v = body.circle_points @ P[i, :3, :3].T + P[i, :3, 3]
         assert np.linalg.norm(v[:, [0, 2]] - c[i], axis=1).max() <= r[i] + 1e-9
+    # and at rest each is the smallest such circle: the projection touches it
+    c0, r0 = bounding_circles(model, model.pose_array(d.rest_poses()))
+    for i, body in enumerate(model.bodies):
+        v = body.circle_points @ body.rest_pose[:3, :3].T + body.rest_pose[:3, 3]
+        assert np.linalg.norm(v[:, [0, 2]] - c0[i], axis=1).max() == pytest.approx(r0[i], abs=1e-6)
 
 
 def test_bounding_circles_cannot_tell_an_upper_tooth_from_the_lower_tooth_beneath_it():

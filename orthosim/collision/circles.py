@@ -1,8 +1,8 @@
 """Detector 1, the paper's bounding circles: one circle per tooth in the x-z (occlusal) plane.
 
-Each tooth's circle bounds the projection of its mesh on the x-z plane. At the rest pose it is the
-smallest circle about the centre of the tooth's bounding box; the circle moves with the tooth's
-pose. The paper assumes teeth turn only about the vertical; so the circles stay bounding under any
+Each tooth's circle bounds the projection of its crown on the x-z plane (the paper's circles do not
+take the roots into account): at the rest pose it is the smallest circle holding that projection;
+the circle moves with the tooth's pose. The paper assumes teeth turn only about the vertical; so the circles stay bounding under any
 pose, a tilt (the tooth's rest-vertical turned by the pose) widens the radius by the tooth's half
 height times the horizontal part of its turned vertical. Overlap is Eq. 1: |c1 - c2| <= r1 + r2.
 No narrow phase: circles cannot tell crown from root, or upper from lower teeth.

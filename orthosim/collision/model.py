@@ -13,8 +13,11 @@ from typing import Callable, Mapping
 
 import numpy as np
 import trimesh
+from scipy.spatial import ConvexHull
+from trimesh.nsphere import minimum_nsphere
 
 from ..spheretree.tree import SphereTree
+from ..tooth import CROWN
 from .contract import CollisionError
 
 
@@ -31,6 +34,9 @@ class Body:
     mesh: trimesh.Trimesh  # local frame, mm
     tree: SphereTree
     rest_pose: np.ndarray  # (4, 4)
+    # (k, 3) local points the bounding circle must hold: the crown, as in the paper (its circles
+    # "do not take into account the shape of the teeth's root"); None: every mesh vertex
+    circle_points: np.ndarray | None = None
 
 
 @dataclass(eq=False)
@@ -206,7 +212,8 @@ class CollisionModel:
                       disable=not sys.stderr.isatty()):
             tooth = dentition.teeth[n]
             tree = trees[n] if trees is not None and n in trees else tree_builder(tooth.mesh)
-            bodies.append(Body(n, tooth.mesh, tree, np.asarray(tooth.rest_pose, float)))
+            crown = tooth.mesh.vertices[np.unique(tooth.mesh.faces[tooth.face_part == CROWN])]
+            bodies.append(Body(n, tooth.mesh, tree, np.asarray(tooth.rest_pose, float), crown))
         return cls(bodies)
 
 
@@ -225,12 +232,15 @@ class _CircleData:
 
 
 def _circle_data(bodies: list[Body]) -> _CircleData:
+    """Per body, the smallest circle holding the x-z projection of its circle points at rest."""
     centers, r_plane, half_height = [], [], []
     for b in bodies:
         R, p = b.rest_pose[:3, :3], b.rest_pose[:3, 3]
-        world = b.mesh.vertices @ R.T + p
-        lo, hi = world.min(axis=0), world.max(axis=0)
-        c = 0.5 * (lo + hi)
+        points = b.mesh.vertices if b.circle_points is None else b.circle_points
+        world = np.asarray(points, float) @ R.T + p
+        hull = world[np.unique(ConvexHull(world[:, [0, 2]]).vertices)]
+        centre_xz, _ = minimum_nsphere(hull[:, [0, 2]])
+        c = np.array([centre_xz[0], 0.5 * (world[:, 1].min() + world[:, 1].max()), centre_xz[1]])
         u = world - c
         r_plane.append(np.sqrt(u[:, 0] ** 2 + u[:, 2] ** 2).max())
         half_height.append(np.abs(u[:, 1]).max())
