@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import exact
-from .descent import descend
+from .descent import compiled_descent, descend
 from .model import FLOAT32_MARGIN_MM, CollisionModel
 from .motion import chord_deviation_bound, interpolate_pose, max_speed, relative_speed_bound, rotation_angle
 from .time_of_contact import contact_interval, contact_interval_from_dots, min_distance_over_step
@@ -43,7 +43,8 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
     D = (model.world_centers(poses1) if world1 is None else world1) - W0  # chord of every node centre
     inflate = np.repeat(chord_deviation_bound(rotation_angle(poses0, poses1), 1.0), model.stride)
     R = model.radii + inflate * model.rho  # radius grown by the node centre's largest chord deviation
-    X, Y, Z = model.axes((W0 + 0.5 * D).astype(np.float32))
+    mid = (W0 + 0.5 * D).astype(np.float32)
+    X, Y, Z = model.axes(mid)
     chord = np.sqrt(np.einsum("naj,naj->nj", *(2 * [D.reshape(len(model.bodies), 3, model.width)])))
     Rs = (R + 0.5 * model.node_values(chord) + FLOAT32_MARGIN_MM).astype(np.float32)
 
@@ -66,7 +67,15 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
         ok = ~np.isnan(enter)
         return ok, {"t": enter, "leave": leave}
 
-    pair, la, lb, payload = descend(model, pair_idx, may_touch, at_leaves)
+    compiled = compiled_descent()
+    if compiled is not None:
+        # the same leaf pairs pass the same prune, in the same order; Eq. 2 then runs on them all at once
+        pair, la, lb = compiled.leaf_pairs(model, mid, Rs, pair_idx)
+        ok, payload = at_leaves(None, la, lb)
+        pair, la, lb = pair[ok], la[ok], lb[ok]
+        payload = {k: v[ok] for k, v in payload.items()}
+    else:
+        pair, la, lb, payload = descend(model, pair_idx, may_touch, at_leaves)
     return _earliest(pair, la, lb, payload.get("t", np.zeros(0)), payload.get("leave", np.zeros(0)), first_only)
 
 

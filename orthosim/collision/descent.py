@@ -19,6 +19,24 @@ import numpy as np
 
 from .model import CollisionModel
 
+# `discrete.overlapping_leaves` and `continuous.swept_leaves` run the compiled descent
+# (`descent_compiled`, the same results) when this is True and numba is installed; False: this
+# module's numpy descent, the reference.
+USE_COMPILED = True
+_compiled = []  # the descent_compiled module, or None without numba (imported on first use)
+
+
+def compiled_descent():
+    """The `descent_compiled` module when the compiled descent is to be used, else None. Imported on
+    first use, so that processes that never descend do not pay numba's import (about 0.3 s)."""
+    if not USE_COMPILED:
+        return None
+    if not _compiled:
+        from . import descent_compiled
+
+        _compiled.append(descent_compiled if descent_compiled.AVAILABLE else None)
+    return _compiled[0]
+
 
 def descend(model: CollisionModel, pair_idx: np.ndarray, may_touch: Callable, at_leaves: Callable | None = None,
             first_only: bool = False, track_pair: bool = False):

@@ -6,13 +6,16 @@ gathers from contiguous 1-D arrays are several times faster than from (n, 3) row
 Eq. 1 on spheres: |c1 - c2| <= r1 + r2 + FLOAT32_MARGIN_MM; the margin (far below any mesh
 resolution) absorbs float32 rounding so the test stays conservative. Because every tree is conservative (each face lies inside its leaf and all
 the leaf's ancestors), two meshes that intersect always have an overlapping leaf pair here.
+
+The descent runs compiled (`descent_compiled`, numba) when numba is installed: the same leaf pairs
+in the same order, about 3x faster than the numpy descent (`descent.USE_COMPILED = False` for it).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .descent import descend
+from .descent import compiled_descent, descend
 from .model import CollisionModel
 
 
@@ -23,8 +26,12 @@ def overlapping_leaves(model: CollisionModel, poses: np.ndarray, pair_idx: np.nd
     poses: (n, 4, 4) local -> arch frame in model body order; pair_idx: (p, 2) body indices;
     world: `model.world_centers(poses)` when the caller has it already.
     """
-    X, Y, Z = model.axes((model.world_centers(poses) if world is None else world).astype(np.float32))
+    flat = (model.world_centers(poses) if world is None else world).astype(np.float32)
     r = model.radii32
+    compiled = compiled_descent()
+    if compiled is not None:
+        return compiled.leaf_pairs(model, flat, r, pair_idx, first_only)
+    X, Y, Z = model.axes(flat)
 
     def may_touch(pair, na, nb):
         dx = X[na] - X[nb]
