@@ -40,13 +40,18 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
     pairs that pass get the exact closed-form test and Eq. 2 in float64.
     """
     W0 = model.world_centers(poses0) if world0 is None else world0  # [body][axis][j]
-    D = (model.world_centers(poses1) if world1 is None else world1) - W0  # chord of every node centre
-    inflate = np.repeat(chord_deviation_bound(rotation_angle(poses0, poses1), 1.0), model.stride)
-    R = model.radii + inflate * model.rho  # radius grown by the node centre's largest chord deviation
-    mid = (W0 + 0.5 * D).astype(np.float32)
+    W1 = model.world_centers(poses1) if world1 is None else world1
+    D = W1 - W0  # chord of every node centre
+    per_body = chord_deviation_bound(rotation_angle(poses0, poses1), 1.0)
+    compiled = compiled_descent()
+    if compiled is not None:  # the same arrays in one compiled pass (a third of this detector's set-up time)
+        mid, R, Rs = compiled.swept_bounds(model, W0, W1, per_body, FLOAT32_MARGIN_MM)
+    else:
+        R = model.radii + np.repeat(per_body, model.stride) * model.rho  # grown by the centre's chord deviation
+        mid = (W0 + 0.5 * D).astype(np.float32)
+        chord = np.sqrt(np.einsum("naj,naj->nj", *(2 * [D.reshape(len(model.bodies), 3, model.width)])))
+        Rs = (R + 0.5 * model.node_values(chord) + FLOAT32_MARGIN_MM).astype(np.float32)
     X, Y, Z = model.axes(mid)
-    chord = np.sqrt(np.einsum("naj,naj->nj", *(2 * [D.reshape(len(model.bodies), 3, model.width)])))
-    Rs = (R + 0.5 * model.node_values(chord) + FLOAT32_MARGIN_MM).astype(np.float32)
 
     def may_touch(pair, na, nb):
         dx = X[na] - X[nb]
@@ -67,7 +72,6 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
         ok = ~np.isnan(enter)
         return ok, {"t": enter, "leave": leave}
 
-    compiled = compiled_descent()
     if compiled is not None:
         # the same leaf pairs pass the same prune, in the same order; Eq. 2 then runs on them all at once
         pair, la, lb = compiled.leaf_pairs(model, mid, Rs, pair_idx)

@@ -47,6 +47,30 @@ if AVAILABLE:
         return out
 
     @njit(cache=True, nogil=True)
+    def _swept_bounds(W0, W1, radii, rho, inflate, n, w, stride, margin):
+        """One pass of the continuous detector's per-node set-up (see `continuous.swept_leaves`):
+        chord midpoints (float32), radii grown by the rotation bound (float64) and the swept
+        radii (float32), in the flat [body][axis][j] layout, with numpy's operation order."""
+        size = n * stride
+        mid = np.empty(size, np.float32)
+        R = np.empty(size, np.float64)
+        Rs = np.empty(size, np.float32)
+        for i in range(n):
+            for j in range(stride):
+                f = i * stride + j
+                d = W1[f] - W0[f]
+                mid[f] = np.float32(W0[f] + 0.5 * d)
+                R[f] = radii[f] + inflate[i] * rho[f]
+                chord = 0.0
+                if j < w:
+                    dx = W1[f] - W0[f]
+                    dy = W1[f + w] - W0[f + w]
+                    dz = W1[f + 2 * w] - W0[f + 2 * w]
+                    chord = np.sqrt(dx * dx + dy * dy + dz * dz)
+                Rs[f] = np.float32(R[f] + 0.5 * chord + margin)
+        return mid, R, Rs
+
+    @njit(cache=True, nogil=True)
     def _grow(buf, m):
         out = np.empty((2 * buf.shape[0], 4), np.int64)
         out[:m] = buf[:m]
@@ -187,3 +211,13 @@ def leaf_pairs(model, flat: np.ndarray, r: np.ndarray, pair_idx: np.ndarray, fir
     if not first_only and len(rnd) > 1 and rnd.min() != rnd.max():
         res = res[np.lexsort((res[:, 0], rnd))]  # stable
     return res[:, 0].copy(), res[:, 1].copy(), res[:, 2].copy()
+
+
+def swept_bounds(model, W0: np.ndarray, W1: np.ndarray, inflate: np.ndarray, margin: float):
+    """(mid float32, R float64, Rs float32) flat arrays of `continuous.swept_leaves`, compiled.
+
+    inflate: (n_bodies,) mm of radius growth per mm of a node's distance from its body's origin."""
+    n = len(model.bodies)
+    return _swept_bounds(np.ascontiguousarray(W0, np.float64), np.ascontiguousarray(W1, np.float64),
+                         np.ascontiguousarray(model.radii, np.float64), np.ascontiguousarray(model.rho, np.float64),
+                         np.ascontiguousarray(inflate, np.float64), n, model.width, model.stride, float(margin))
