@@ -182,7 +182,11 @@ def dense_first_contact(oa, ob, T0a, T1a, T0b, T1b, samples: int = 400, bisectio
         return None
     if hit_k == 0:
         return 0.0, 0.0
-    lo, hi = ts[hit_k - 1], ts[hit_k]
+    return _bisect_contact(oa, ob, T0a, T1a, T0b, T1b, ts[hit_k - 1], ts[hit_k], bisections)
+
+
+def _bisect_contact(oa, ob, T0a, T1a, T0b, T1b, lo: float, hi: float, bisections: int) -> tuple[float, float]:
+    """Narrow [lo, hi] (apart at lo, intersecting at hi) around the meshes' first contact."""
     for _ in range(bisections):
         mid = 0.5 * (lo + hi)
         exact.set_pose(oa, interpolate_pose(T0a, T1a, mid))
@@ -305,16 +309,7 @@ def _first_contact_in_window(oa, ob, T0a, T1a, T0b, T1b, t0: float, t1: float, s
         if exact.collide(oa, ob)[0]:
             if k == 0:
                 return float(ts[0]), float(ts[0])
-            lo, hi = ts[k - 1], ts[k]
-            for _ in range(bisections):
-                mid = 0.5 * (lo + hi)
-                exact.set_pose(oa, interpolate_pose(T0a, T1a, mid))
-                exact.set_pose(ob, interpolate_pose(T0b, T1b, mid))
-                if exact.collide(oa, ob)[0]:
-                    hi = mid
-                else:
-                    lo = mid
-            return float(lo), float(hi)
+            return _bisect_contact(oa, ob, T0a, T1a, T0b, T1b, ts[k - 1], ts[k], bisections)
     return None
 
 
