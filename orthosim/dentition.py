@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .fdi import Arch, arch_of, arch_order
+from .fdi import Arch, arch_order
 from .tooth import Tooth
 
 
@@ -53,9 +53,3 @@ class Dentition:
             out[n] = t.to_world(t.crown_center, None if poses is None else poses[n])
         return out
 
-    def without(self, extracted: set[int]) -> "Dentition":
-        return Dentition({n: t for n, t in self.teeth.items() if n not in extracted}, self.description, self.info)
-
-
-def arch_of_tooth(fdi: int) -> Arch:
-    return arch_of(fdi)

@@ -19,15 +19,13 @@ from __future__ import annotations
 import numpy as np
 
 from .dentition import Dentition
-from .tooth import CROWN
 
 Poses = dict[int, np.ndarray]
 
 
 def _crown_world(dent: Dentition, fdi: int, poses: Poses | None) -> np.ndarray:
     t = dent.teeth[fdi]
-    crown_vertices = t.mesh.vertices[np.unique(t.mesh.faces[t.face_part == CROWN])]
-    return t.to_world(crown_vertices, None if poses is None else poses[fdi])
+    return t.to_world(t.crown_vertices, None if poses is None else poses[fdi])
 
 
 def _horizontal_direction(dent: Dentition, fdi: int, local_dir: np.ndarray, poses: Poses | None) -> np.ndarray:
@@ -83,8 +81,7 @@ def molar_relation(dent: Dentition, poses: Poses | None = None) -> float:
 def mesiodistal_width(dent: Dentition, fdi: int) -> float:
     """mm, the crown's extent along its own mesial axis (contact point to contact point)."""
     t = dent.teeth[fdi]
-    crown = t.mesh.vertices[np.unique(t.mesh.faces[t.face_part == CROWN])]
-    along = crown @ t.mesial
+    along = t.crown_vertices @ t.mesial
     return float(along.max() - along.min())
 
 

@@ -15,6 +15,7 @@ All coordinates are millimetres.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import trimesh
@@ -69,9 +70,10 @@ class Tooth:
         """mm, CEJ to apex along the long axis."""
         return float(-self.apex[1])
 
-    @property
-    def crown_mesh(self) -> trimesh.Trimesh:
-        return self.mesh.submesh([np.flatnonzero(self.face_part == CROWN)], append=True)
+    @cached_property
+    def crown_vertices(self) -> np.ndarray:
+        """(k, 3) mm, local: the vertices of the crown's faces (coronal of the CEJ)."""
+        return self.mesh.vertices[np.unique(self.mesh.faces[self.face_part == CROWN])]
 
     def world_mesh(self, pose: np.ndarray | None = None) -> trimesh.Trimesh:
         """A copy of the mesh placed by `pose` (4x4 local -> arch frame; the rest pose by default)."""

@@ -189,10 +189,7 @@ class DentitionScene:
     def _drawn_vertices(self, fdi: int) -> np.ndarray:
         """(n, 3) arch-frame rest-pose vertices of what is drawn of `fdi` (crown only with hide_roots)."""
         t = self.dentition.teeth[fdi]
-        v = t.mesh.vertices
-        if self.hide_roots:
-            v = v[np.unique(t.mesh.faces[t.face_part == CROWN])]
-        return t.to_world(v)
+        return t.to_world(t.crown_vertices if self.hide_roots else t.mesh.vertices)
 
     def set_view(self, name: str) -> CameraView:
         v = self.view(name)

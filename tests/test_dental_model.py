@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-import trimesh
 
 from orthosim import fdi as F
 from orthosim.anatomy import dimensions
@@ -52,7 +51,7 @@ def test_crowns_have_wheeler_widths_and_heights(dent):
     for n, tooth in dent.teeth.items():
         d = dimensions(n)
         assert mesiodistal_width(dent, n) == pytest.approx(d.md_width, abs=0.02)
-        crown = tooth.mesh.vertices[np.unique(tooth.mesh.faces[tooth.face_part == CROWN])]
+        crown = tooth.crown_vertices
         assert np.ptp(crown[:, 2]) == pytest.approx(d.bl_width, abs=0.05)
         assert crown[:, 1].max() == pytest.approx(d.crown_height, abs=0.05)
         assert tooth.root_length == pytest.approx(d.root_length)

@@ -17,7 +17,6 @@ from scipy.spatial import ConvexHull
 from trimesh.nsphere import minimum_nsphere
 
 from ..spheretree.tree import SphereTree
-from ..tooth import CROWN
 from .contract import CollisionError
 
 
@@ -212,8 +211,7 @@ class CollisionModel:
                       disable=not sys.stderr.isatty()):
             tooth = dentition.teeth[n]
             tree = trees[n] if trees is not None and n in trees else tree_builder(tooth.mesh)
-            crown = tooth.mesh.vertices[np.unique(tooth.mesh.faces[tooth.face_part == CROWN])]
-            bodies.append(Body(n, tooth.mesh, tree, np.asarray(tooth.rest_pose, float), crown))
+            bodies.append(Body(n, tooth.mesh, tree, np.asarray(tooth.rest_pose, float), tooth.crown_vertices))
         return cls(bodies)
 
 

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..tooth import CROWN, ROOT, Tooth
+from ..tooth import ROOT, Tooth
 from .resistance import center_of_resistance, tipping_center
 
 # Tooth density for masses and inertias (mean of enamel, dentine and root): 2.2 g/cm^3 = 2.2e-3 g/mm^3.
@@ -100,8 +100,7 @@ class ToothMechanics:
 def bracket_point(tooth: Tooth) -> np.ndarray:
     """(3,) local mm: the labial (buccal) crown surface at mid-crown height, where a bracket sits."""
     v = tooth.mesh.vertices
-    crown_v = np.unique(tooth.mesh.faces[tooth.face_part == CROWN])
-    cv = v[crown_v] if len(crown_v) else v[v[:, 1] >= 0]
+    cv = tooth.crown_vertices if len(tooth.crown_vertices) else v[v[:, 1] >= 0]
     y = float(tooth.crown_center[1])
     h = max(0.15 * (cv[:, 1].max() - 0.0), 0.5)
     band = cv[np.abs(cv[:, 1] - y) <= h]
