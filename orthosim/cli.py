@@ -160,7 +160,7 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
     """Simulate the case (orthosim.movement), draw its steps unless --no-render, write
     out_dir/metrics.json and out_dir/distances.csv."""
     from .case import load_case
-    from .metrics import model_summary
+    from .metrics import occlusion_summary
     from .movement.report import RunReport
     from .movement.simulation import MovementModel, simulate
 
@@ -177,8 +177,8 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
             pass
     else:
         extra.update(_render_steps(dent, records, extracted, out_dir, render_opts))
-    extra["occlusion"] = model_summary(dent, dent.rest_poses()).get("occlusion")  # the initial model's
-    extra["occlusion_final"] = model_summary(dent, {n: report.last.poses[n] for n in dent.fdis}).get("occlusion")
+    extra["occlusion"] = occlusion_summary(dent)  # the initial model's
+    extra["occlusion_final"] = occlusion_summary(dent, {n: report.last.poses[n] for n in dent.fdis})
     extra["wall_s"] = time.perf_counter() - started
     metrics = report.write(out_dir, extra)
     click.echo(f"{case.name} ({detector}): {metrics['steps']} steps, total distance "

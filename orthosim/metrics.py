@@ -12,9 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import fdi as F
 from .dentition import Dentition
-from .occlusion import bolton_ratios, molar_relation, overbite, overjet
+from .occlusion import molar_relation, overbite, overjet
 
 Poses = dict[int, np.ndarray]
 
@@ -32,26 +31,10 @@ def tooth_to_tooth_distances(dent: Dentition, poses: Poses | None = None, absent
             for a, b in dent.adjacent_pairs(absent)]
 
 
-def model_summary(dent: Dentition, poses: Poses | None = None) -> dict:
-    """Per-tooth landmarks and the occlusal figures of a (posed) dentition, ready for JSON."""
-    centers = dent.crown_centers(poses)
-    teeth = {}
-    for n in dent.fdis:
-        t = dent.teeth[n]
-        pose = t.rest_pose if poses is None else poses[n]
-        teeth[str(n)] = {
-            "name": F.name(n),
-            "crown_center_mm": centers[n],
-            "apex_mm": t.to_world(t.apex, pose),
-            "long_axis": pose[:3, :3] @ t.long_axis,
-            "pose": pose,
-            "faces": int(len(t.mesh.faces)),
-            "volume_mm3": float(t.mesh.volume),
-        }
-    out = {"teeth": teeth}
-    if {11, 21, 31, 41} <= set(dent.teeth):
-        out["occlusion"] = {"overjet_mm": overjet(dent, poses), "overbite_mm": overbite(dent, poses),
-                            "molar_relation_mm": molar_relation(dent, poses)}
-    if all(10 * q + p in dent.teeth for q in F.QUADRANTS for p in range(1, 7)):
-        out["bolton_percent"] = bolton_ratios(dent)
-    return out
+def occlusion_summary(dent: Dentition, poses: Poses | None = None) -> dict | None:
+    """Overjet, overbite and molar relation (mm) of a (posed) dentition, ready for JSON; None when
+    the model lacks the four central incisors these figures are measured on."""
+    if not {11, 21, 31, 41} <= set(dent.teeth):
+        return None
+    return {"overjet_mm": overjet(dent, poses), "overbite_mm": overbite(dent, poses),
+            "molar_relation_mm": molar_relation(dent, poses)}
