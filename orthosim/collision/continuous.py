@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import exact
-from .descent import compiled_descent, descend
+from .descent import compiled_descent, descend, sphere_overlap_test
 from .model import FLOAT32_MARGIN_MM, CollisionModel
 from .motion import chord_deviation_bound, interpolate_pose, max_speed, relative_speed_bound, rotation_angle
 from .time_of_contact import contact_interval, contact_interval_from_dots, min_distance_over_step
@@ -51,15 +51,6 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
         mid = (W0 + 0.5 * D).astype(np.float32)
         chord = np.sqrt(np.einsum("naj,naj->nj", *(2 * [D.reshape(len(model.bodies), 3, model.width)])))
         Rs = (R + 0.5 * model.node_values(chord) + FLOAT32_MARGIN_MM).astype(np.float32)
-    X, Y, Z = model.axes(mid)
-
-    def may_touch(pair, na, nb):
-        dx = X[na] - X[nb]
-        dy = Y[na] - Y[nb]
-        dz = Z[na] - Z[nb]
-        s = Rs[na] + Rs[nb]
-        return dx * dx + dy * dy + dz * dz <= s * s
-
     x0, y0, z0 = model.axes(W0)
     dx, dy, dz = model.axes(D)
 
@@ -79,7 +70,7 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
         pair, la, lb = pair[ok], la[ok], lb[ok]
         payload = {k: v[ok] for k, v in payload.items()}
     else:
-        pair, la, lb, payload = descend(model, pair_idx, may_touch, at_leaves)
+        pair, la, lb, payload = descend(model, pair_idx, sphere_overlap_test(model, mid, Rs), at_leaves)
     return _earliest(pair, la, lb, payload.get("t", np.zeros(0)), payload.get("leave", np.zeros(0)), first_only)
 
 

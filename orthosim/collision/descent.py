@@ -38,6 +38,24 @@ def compiled_descent():
     return _compiled[0]
 
 
+def sphere_overlap_test(model: CollisionModel, flat: np.ndarray, radii: np.ndarray) -> Callable:
+    """The descent's `may_touch` for spheres: node pairs with |c_a - c_b|^2 <= (r_a + r_b)^2.
+
+    flat: float32 centres in the [body][axis][j] layout (`CollisionModel.world_centers`); radii:
+    float32 per flat node. The compiled descent applies the same test with the same arithmetic.
+    """
+    X, Y, Z = model.axes(flat)
+
+    def may_touch(pair, na, nb):
+        dx = X[na] - X[nb]
+        dy = Y[na] - Y[nb]
+        dz = Z[na] - Z[nb]
+        s = radii[na] + radii[nb]
+        return dx * dx + dy * dy + dz * dz <= s * s
+
+    return may_touch
+
+
 def descend(model: CollisionModel, pair_idx: np.ndarray, may_touch: Callable, at_leaves: Callable | None = None,
             first_only: bool = False, track_pair: bool = False):
     """Run the descent; returns (pair, leaf a, leaf b, payload) of every accepted leaf pair.

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .descent import compiled_descent, descend
+from .descent import compiled_descent, descend, sphere_overlap_test
 from .model import CollisionModel
 
 
@@ -31,16 +31,7 @@ def overlapping_leaves(model: CollisionModel, poses: np.ndarray, pair_idx: np.nd
     compiled = compiled_descent()
     if compiled is not None:
         return compiled.leaf_pairs(model, flat, r, pair_idx, first_only)
-    X, Y, Z = model.axes(flat)
-
-    def may_touch(pair, na, nb):
-        dx = X[na] - X[nb]
-        dy = Y[na] - Y[nb]
-        dz = Z[na] - Z[nb]
-        s = r[na] + r[nb]
-        return dx * dx + dy * dy + dz * dz <= s * s
-
-    pair, la, lb, _ = descend(model, pair_idx, may_touch, first_only=first_only)
+    pair, la, lb, _ = descend(model, pair_idx, sphere_overlap_test(model, flat, r), first_only=first_only)
     return pair, la, lb
 
 
