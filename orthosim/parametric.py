@@ -18,7 +18,7 @@ the occlusal plane (lower cusp tips).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np

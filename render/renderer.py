@@ -389,7 +389,6 @@ class Renderer:
 
     def _sync_buffers(self, scene) -> None:
         """Upload the primitives the scene changed since the last draw (see DentitionScene.buffer_versions)."""
-        GL = self._GL
         for prim, version in scene.buffer_versions.items():
             if self._seen_versions.get(prim) == version:
                 continue

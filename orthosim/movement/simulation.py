@@ -176,7 +176,7 @@ def arch_direction(model: MovementModel, poses: Mapping[int, np.ndarray], fdi: i
     i = order.index(fdi)
     j = i + _arch_step(fdi, direction)
     tooth = model.dentition.teeth[fdi]
-    R, p = poses[fdi][:3, :3], poses[fdi][:3, 3]
+    R = poses[fdi][:3, :3]
     if 0 <= j < len(order):
         other = model.dentition.teeth[order[j]]
         c_other = other.to_world(other.crown_center, poses[order[j]])
