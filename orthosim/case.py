@@ -21,6 +21,8 @@ import numpy as np
 from . import fdi as F
 from .errors import CaseError
 
+CASES_DIR = Path(__file__).resolve().parent.parent / "cases"
+DEFAULT_CASE = CASES_DIR / "case1_first_premolar_extraction.toml"  # the demo's and the bench's case
 DIRECTIONS = ("mesial", "distal", "labial", "lingual", "occlusal", "apical")
 POINTS = ("bracket", "crown_center", "center_of_resistance")
 MOMENT_AXES = ("mesiodistal", "labiolingual", "long_axis")

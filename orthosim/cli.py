@@ -17,8 +17,6 @@ import click
 from . import __version__
 from .errors import OrthosimError
 
-ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_CASE = ROOT / "cases" / "case1_first_premolar_extraction.toml"
 DEMO_VIEWS = ("right_buccal", "maxillary_occlusal")
 
 
@@ -108,6 +106,8 @@ def run(case: Path, out_dir: Path | None, detector: str | None, **render_opts) -
 @render_options
 def demo(out_dir: Path, **render_opts) -> None:
     """Run the paper's case 1 (cases/case1_...) into out/demo/."""
+    from .case import DEFAULT_CASE
+
     render_opts["views"] = render_opts.get("views") or DEMO_VIEWS
     _run_case(DEFAULT_CASE, out_dir, None, render_opts)
 

@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from orthosim.case import DEFAULT_CASE  # the paper's case 1, as the demo: ~1,100-1,400 contact spheres a step
+
 from .frame_state import FrameState
 
 TARGET_FPS = 40  # the paper's figure, with a graphics card
@@ -157,9 +159,6 @@ def _render_variants(dentition, states, size, frames_per_round: int, rounds: int
         for name in variants
     }
 
-
-# The paper's case 1: molars pushed into extraction spaces, ~1,100-1,400 contact spheres per step.
-DEFAULT_CASE = Path(__file__).resolve().parent.parent / "cases" / "case1_first_premolar_extraction.toml"
 
 
 def _simulation(case_obj, dentition, detector: str):
