@@ -10,6 +10,7 @@ All coordinates in mm.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 
 def node_vertex_groups(faces: np.ndarray, node_of_face: np.ndarray, n_nodes: int) -> np.ndarray:
@@ -56,6 +57,32 @@ def enclosing_spheres(points: np.ndarray, iterations: int = 200) -> tuple[np.nda
     return best_c, d
 
 
+@njit(cache=True, nogil=True)
+def _farthest(points, centers):
+    """(G, M, 3) and (G, C, 3) -> (G, C): distance from each centre to the farthest point of its group."""
+    g_n, m_n = points.shape[0], points.shape[1]
+    c_n = centers.shape[1]
+    out = np.empty((g_n, c_n))
+    for g in range(g_n):
+        for c in range(c_n):
+            x, y, z = centers[g, c, 0], centers[g, c, 1], centers[g, c, 2]
+            best = 0.0
+            for m in range(m_n):
+                dx, dy, dz = points[g, m, 0] - x, points[g, m, 1] - y, points[g, m, 2] - z
+                d2 = dx * dx + dy * dy + dz * dz
+                if d2 > best:
+                    best = d2
+            out[g, c] = np.sqrt(best)
+    return out
+
+
+def radii_to_cover_each(points: np.ndarray, centers: np.ndarray) -> np.ndarray:
+    """(G, M, 3) padded groups and (G, C, 3) candidate centres per group, mm -> (G, C) smallest
+    radii holding every point of the group (compiled: the optimising builder asks this for
+    millions of candidates)."""
+    return _farthest(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(centers, dtype=np.float64))
+
+
 def radii_to_cover(points: np.ndarray, centers: np.ndarray) -> np.ndarray:
     """(G, M, 3) padded groups and (G, 3) centres, mm -> (G,) smallest radii holding every point."""
-    return np.sqrt(((points - centers[:, None, :]) ** 2).sum(axis=2).max(axis=1))
+    return radii_to_cover_each(points, np.asarray(centers)[:, None, :])[:, 0]

@@ -29,11 +29,10 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from .enclose import enclosing_spheres, node_vertex_groups, radii_to_cover
-from .inside import CrossingIndex
+from .enclose import enclosing_spheres, node_vertex_groups, radii_to_cover, radii_to_cover_each
+from .outside_band import OutsideBand
 from .tree import SphereTree
 
 
@@ -140,42 +139,19 @@ def _split_with_capacity(points: np.ndarray, k: int, capacity: int, rng, iterati
     return label
 
 
-def _outside_band(vertices: np.ndarray, faces: np.ndarray, options: FitOptions) -> tuple[np.ndarray, np.ndarray, float]:
-    """Voxel centres outside the tooth within `band_mm` of it, (n, 3) mm: all those within
-    `fine_band_mm` (where the thin caps of good spheres lie), and every other one of each axis
-    beyond (bulges, which only need to be seen, counted 8 times); and the voxel size, mm."""
-    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    lo, hi = lo - options.band_mm, hi + options.band_mm
-    h = max(options.voxel_mm, float(np.prod(hi - lo) / options.max_voxels) ** (1 / 3))
-    shape = tuple(int(n) for n in np.ceil((hi - lo) / h).astype(np.int64) + 1)
-    # An irrational shift keeps voxel centres off the mesh's own (often round-numbered) coordinates.
-    origin = lo - h * 0.318309886
-    inside = CrossingIndex(vertices, faces).voxels(origin, h, shape)
-    dist = ndimage.distance_transform_edt(~inside) * h
-    near = ~inside & (dist <= options.fine_band_mm)
-    far = ~inside & (dist > options.fine_band_mm) & (dist <= options.band_mm)
-    far[1::2] = False
-    far[:, 1::2] = False
-    far[:, :, 1::2] = False
-    return origin + h * np.argwhere(near), origin + h * np.argwhere(far), h
-
-
 class _LeafFitter:
     """Scores leaf spheres by the outside-band voxels they hold; fits and re-fits them."""
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, options: FitOptions):
         self.vertices, self.faces, self.options = vertices, faces, options
-        near, far, self.voxel = _outside_band(vertices, faces, options)
-        self.near, self.far = cKDTree(near), cKDTree(far)
-
-    def count(self, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
-        """Outside volume of spheres, (n, 3) and (n,) mm, in fine voxels (the far tier counts 8 each)."""
-        cnt = self.near.query_ball_point(centres, radii, return_length=True)
-        return cnt + 8 * self.far.query_ball_point(centres, radii, return_length=True)
+        self.band = OutsideBand(vertices, faces, voxel_mm=options.voxel_mm, max_voxels=options.max_voxels,
+                                band_mm=options.band_mm, fine_mm=options.fine_band_mm)
+        self.voxel = self.band.voxel
+        self.count = self.band.count  # outside volume of spheres, (n, 3) and (n,) mm, in fine voxels
 
     def score(self, pts: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For padded patch points (L, M, 3) and centres (L, c, 3), mm: outside voxels held, radii (L, c)."""
-        r = np.sqrt(((pts[:, None, :, :] - centres[:, :, None, :]) ** 2).sum(axis=3).max(axis=2))
+        r = radii_to_cover_each(pts, centres)
         cnt = self.count(centres.reshape(-1, 3), r.ravel()).reshape(r.shape)
         # Ties (e.g. no outside voxel at all) go to the smaller sphere.
         return cnt + r / (100 * r.max()), r
@@ -204,7 +180,7 @@ class _LeafFitter:
         k = min(k + 1, n)
         _, near = cKDTree(c).query(crit_pts.mean(axis=1), k=k)
         near = near.reshape(n, -1)
-        need = np.sqrt(((crit_pts[:, None, :, :] - c[near][:, :, None, :]) ** 2).sum(axis=3).max(axis=2))
+        need = radii_to_cover_each(crit_pts, c[near])
         r_grown = np.maximum(r[near], need)
         base = self.count(c, r)
         gain_a = self.count(c, r_shrunk) - base  # <= 0
@@ -284,7 +260,7 @@ class _LeafFitter:
         k = min(self.options.reassign_candidates, len(r))
         _, near = cKDTree(c).query(tri.mean(axis=1), k=k)
         near = np.concatenate([leaf_of_face[:, None], near.reshape(len(tri), -1)], axis=1)  # current first
-        far = np.sqrt(((tri[:, None, :, :] - c[near][:, :, None, :]) ** 2).sum(axis=3).max(axis=2))
+        far = radii_to_cover_each(tri, c[near])
         rn = r[near]
         slack = rn - far  # depth of the face inside each candidate, mm
         if self.options.relative_depth:
