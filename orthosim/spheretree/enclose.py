@@ -34,6 +34,35 @@ def node_vertex_groups(faces: np.ndarray, node_of_face: np.ndarray, n_nodes: int
     return out
 
 
+@njit(cache=True, nogil=True)
+def _badoiu_clarkson(points, iterations):
+    """Per group of (G, M, 3): the best centre met in `iterations` steps toward the farthest point."""
+    g_n, m_n = points.shape[0], points.shape[1]
+    best_c = np.empty((g_n, 3))
+    for g in range(g_n):
+        c = np.empty(3)
+        for a in range(3):
+            lo, hi = points[g, 0, a], points[g, 0, a]
+            for m in range(1, m_n):
+                lo, hi = min(lo, points[g, m, a]), max(hi, points[g, m, a])
+            c[a] = 0.5 * (lo + hi)
+        best_c[g] = c
+        best = np.inf
+        for i in range(iterations):
+            far, far_d2 = 0, -1.0
+            for m in range(m_n):
+                dx, dy, dz = points[g, m, 0] - c[0], points[g, m, 1] - c[1], points[g, m, 2] - c[2]
+                d2 = dx * dx + dy * dy + dz * dz
+                if d2 > far_d2:
+                    far, far_d2 = m, d2
+            if far_d2 < best:
+                best = far_d2
+                best_c[g] = c
+            for a in range(3):
+                c[a] += (points[g, far, a] - c[a]) / (i + 2)
+    return best_c
+
+
 def enclosing_spheres(points: np.ndarray, iterations: int = 200) -> tuple[np.ndarray, np.ndarray]:
     """Near-minimal spheres around padded point groups.
 
@@ -42,19 +71,9 @@ def enclosing_spheres(points: np.ndarray, iterations: int = 200) -> tuple[np.nda
     toward the farthest point (within a few per cent of the minimal radius), started at the
     bounding-box centre.
     """
-    c = 0.5 * (points.min(axis=1) + points.max(axis=1))
-    best_c = c.copy()
-    best_r = np.sqrt(((points - c[:, None, :]) ** 2).sum(axis=2).max(axis=1))
-    rows = np.arange(len(points))
-    for i in range(1, iterations + 1):
-        d2 = ((points - c[:, None, :]) ** 2).sum(axis=2)
-        far = d2.argmax(axis=1)
-        r = np.sqrt(d2[rows, far])
-        better = r < best_r
-        best_c[better], best_r[better] = c[better], r[better]
-        c = c + (points[rows, far] - c) / (i + 1)
-    d = np.sqrt(((points - best_c[:, None, :]) ** 2).sum(axis=2).max(axis=1))
-    return best_c, d
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    c = _badoiu_clarkson(points, iterations)
+    return c, radii_to_cover(points, c)
 
 
 @njit(cache=True, nogil=True)

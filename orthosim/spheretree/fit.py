@@ -29,6 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 
 from .enclose import enclosing_spheres, node_vertex_groups, radii_to_cover, radii_to_cover_each
@@ -84,14 +85,33 @@ def medial_radii(
     return r
 
 
+@njit(cache=True, nogil=True)
+def _farthest_point_sampling(points, k, start):
+    """Indices of k of the (n, d) points, each the farthest from those chosen before, from `start`."""
+    n, dims = points.shape
+    chosen = np.empty(k, np.int64)
+    mind = np.full(n, np.inf)
+    chosen[0] = start
+    for s in range(1, k + 1):
+        p = chosen[s - 1]
+        best, arg = -1.0, 0
+        for i in range(n):
+            d2 = 0.0
+            for a in range(dims):
+                t = points[i, a] - points[p, a]
+                d2 += t * t
+            if d2 < mind[i]:
+                mind[i] = d2
+            if mind[i] > best:
+                best, arg = mind[i], i
+        if s < k:
+            chosen[s] = arg
+    return chosen
+
+
 def _farthest_points(points: np.ndarray, k: int, rng) -> np.ndarray:
     """Indices of k points spread out by farthest-point sampling from a random start."""
-    chosen = [int(rng.integers(len(points)))]
-    mind = ((points - points[chosen[0]]) ** 2).sum(axis=1)
-    for _ in range(1, k):
-        chosen.append(int(mind.argmax()))
-        mind = np.minimum(mind, ((points - points[chosen[-1]]) ** 2).sum(axis=1))
-    return np.asarray(chosen)
+    return _farthest_point_sampling(np.ascontiguousarray(points, dtype=np.float64), k, int(rng.integers(len(points))))
 
 
 def _kmeans(points: np.ndarray, k: int, iterations: int, rng, weights: np.ndarray | None = None) -> np.ndarray:
@@ -133,9 +153,10 @@ def _split_with_capacity(points: np.ndarray, k: int, capacity: int, rng, iterati
                 left -= 1
                 if not left:
                     break
-        for j in range(k):
-            if (label == j).any():
-                centres[j] = points[label == j].mean(axis=0)
+        cnt = np.bincount(label, minlength=k)
+        sums = np.stack([np.bincount(label, weights=points[:, i], minlength=k) for i in range(points.shape[1])], 1)
+        filled = cnt > 0
+        centres[filled] = sums[filled] / cnt[filled][:, None]
     return label
 
 
