@@ -9,14 +9,19 @@ atomically, so two processes racing on the same tree both end with a whole file.
 Left and right teeth are mirror images (x -> -x in the local frame, see `orthosim.tooth`), and a
 mirror maps a conservative tree to a conservative tree exactly (negating a float is exact), so a
 mesh and its mirror share one entry: the tree is built and stored for whichever of the two has the
-smaller key, and mirrored on the way out for the other. A full dentition costs half the builds.
+smaller key, and mirrored on the way out for the other. A full dentition costs half the builds,
+and `cached_sphere_trees` spreads those builds over the machine's cores (one process each).
 """
 
 from __future__ import annotations
 
 import hashlib
+import multiprocessing
 import os
 import zipfile
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +30,7 @@ from ..atomic import atomic_path
 from .build import build_sphere_tree, check_request, mesh_arrays
 from .tree import SphereTree
 
-BUILDER_VERSION = 5
+BUILDER_VERSION = 6
 
 
 def default_cache_dir() -> Path:
@@ -80,29 +85,97 @@ def mirror_tree(tree: SphereTree) -> SphereTree:
                       tree.leaf_of_face, tree.method)
 
 
-def cached_sphere_tree(mesh, method: str = "fit", branching: int = 8, depth: int = 4, cache_dir: str | Path | None = None) -> SphereTree:
-    """`build_sphere_tree` through the on-disk cache: load the tree if this mesh (or its mirror image)
-    was built before with the same request."""
-    check_request(method, branching, depth)
+@dataclass(frozen=True)
+class _Entry:
+    """Where a mesh's tree lives in the cache, and whether it is stored for the mirror image."""
+
+    path: Path
+    flip: bool
+    mesh: tuple[np.ndarray, np.ndarray]  # the mesh the stored tree was (or is to be) built for
+
+
+def _entry(mesh, method: str, branching: int, depth: int, folder: Path) -> _Entry:
     vertices, faces = mesh_arrays(mesh)
     key = cache_key(vertices, faces, method, branching, depth)
     mirrored = mirror_mesh(vertices, faces)
     mirror_key = cache_key(*mirrored, method, branching, depth)
     flip = mirror_key < key
+    return _Entry(folder / f"{min(key, mirror_key)}.npz", flip, mirrored if flip else (vertices, faces))
+
+
+def _load(entry: _Entry, branching: int, depth: int) -> SphereTree | None:
+    """The stored tree, or None when absent, damaged or not this request's (rebuilt and overwritten)."""
+    if not entry.path.is_file():
+        return None
+    try:
+        tree = load_tree(entry.path)
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile):
+        return None
+    if len(tree.leaf_of_face) != len(entry.mesh[1]) or tree.branching != branching or tree.depth != depth:
+        return None
+    return tree
+
+
+def _store(tree: SphereTree, entry: _Entry) -> None:
+    try:
+        save_tree(tree, entry.path)
+    except OSError:
+        pass  # a read-only or full cache folder costs a rebuild next time, never a failure
+
+
+def cached_sphere_tree(mesh, method: str = "fit", branching: int = 8, depth: int = 4, cache_dir: str | Path | None = None) -> SphereTree:
+    """`build_sphere_tree` through the on-disk cache: load the tree if this mesh (or its mirror image)
+    was built before with the same request."""
+    return cached_sphere_trees([mesh], method, branching, depth, cache_dir, workers=1)[0]
+
+
+def _build(args) -> SphereTree:
+    mesh, method, branching, depth = args
+    return build_sphere_tree(mesh, method, branching, depth)
+
+
+def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int = 8, depth: int = 4,
+                        cache_dir: str | Path | None = None, workers: int | None = None,
+                        progress: Callable[[int], None] | None = None) -> list[SphereTree]:
+    """The trees of many meshes through the cache: each distinct mesh (a mirror pair counts once)
+    is loaded or built once, the builds spread over `workers` processes (default: one per core).
+
+    `progress(n)` is called as n more meshes are done. Trees come back in the order of `meshes`.
+    """
+    check_request(method, branching, depth)
     folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    path = folder / f"{min(key, mirror_key)}.npz"
-    tree = None
-    if path.is_file():
-        try:
-            tree = load_tree(path)
-            if len(tree.leaf_of_face) != len(faces) or tree.branching != branching or tree.depth != depth:
-                tree = None
-        except (OSError, ValueError, KeyError, zipfile.BadZipFile):
-            tree = None  # a damaged cache entry is rebuilt and overwritten below
-    if tree is None:
-        tree = build_sphere_tree(mirrored if flip else (vertices, faces), method, branching, depth)
-        try:
-            save_tree(tree, path)
-        except OSError:
-            pass  # a read-only or full cache folder costs a rebuild next time, never a failure
-    return mirror_tree(tree) if flip else tree
+    entries = [_entry(m, method, branching, depth, folder) for m in meshes]
+    stored: dict[Path, SphereTree] = {}
+    missing: dict[Path, _Entry] = {}
+    for e in entries:
+        if e.path in stored or e.path in missing:
+            continue
+        tree = _load(e, branching, depth)
+        if tree is None:
+            missing[e.path] = e
+        else:
+            stored[e.path] = tree
+    waiting = list(missing.values())
+    users = {p: sum(e.path == p for e in entries) for p in missing}
+    if progress is not None:
+        progress(len(entries) - sum(users.values()))
+    workers = min(workers or os.cpu_count() or 1, len(waiting))
+    jobs = [(e.mesh, method, branching, depth) for e in waiting]
+    if workers > 1:
+        # fork: the children start at once with the parent's imports and compiled kernels
+        context = multiprocessing.get_context("fork")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+            futures = {pool.submit(_build, job): e for job, e in zip(jobs, waiting)}
+            for done in as_completed(futures):
+                e = futures[done]
+                stored[e.path] = done.result()
+                _store(stored[e.path], e)
+                if progress is not None:
+                    progress(users[e.path])
+    else:
+        for job, e in zip(jobs, waiting):
+            stored[e.path] = _build(job)
+            _store(stored[e.path], e)
+            if progress is not None:
+                progress(users[e.path])
+    return [mirror_tree(stored[e.path]) if e.flip else stored[e.path] for e in entries]

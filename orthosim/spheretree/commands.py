@@ -81,10 +81,10 @@ def load_source(source: Path) -> list[NamedMesh]:
     return out
 
 
-def _progress(items, desc: str):
+def _progress(items, desc: str, total: int | None = None):
     from tqdm import tqdm
 
-    return tqdm(items, desc=desc, unit="tooth", disable=not sys.stderr.isatty())
+    return tqdm(items, desc=desc, total=total, unit="tooth", disable=not sys.stderr.isatty())
 
 
 def _request_options(f):
@@ -116,25 +116,28 @@ def spheretree() -> None:
 def build(source: Path, method: str, branching: int, depth: int | None, out_dir: Path, fmt: str,
           cache_dir: Path | None, no_cache: bool) -> None:
     """Build the sphere tree of every tooth in SOURCE (mesh, folder or case .toml) into OUT."""
-    from .build import build_sphere_tree
-    from .cache import cached_sphere_tree, save_tree
+    import tempfile
+
+    from .cache import cached_sphere_trees, save_tree
     from .sph import write_sph
 
     depth = _depth(method, depth)
     check_request(method, branching, depth, where="spheretree build")
     meshes = load_source(source)
     t0 = time.perf_counter()
-    leaves = []
-    for m in _progress(meshes, "sphere trees"):
-        mesh = (m.vertices, m.faces)
-        tree = build_sphere_tree(mesh, method, branching, depth) if no_cache else cached_sphere_tree(mesh, method, branching, depth, cache_dir)
+    with tempfile.TemporaryDirectory(prefix="orthosim-trees-") as scratch, _progress(None, "sphere trees", len(meshes)) as bar:
+        # --no-cache: a throw-away cache, so nothing is read or kept, yet mirror pairs still build once
+        trees = cached_sphere_trees([(m.vertices, m.faces) for m in meshes], method, branching, depth,
+                                    scratch if no_cache else cache_dir, progress=bar.update)
+    build_s = time.perf_counter() - t0
+    for m, tree in zip(meshes, trees):
         if fmt == "sph":
             write_sph(tree, out_dir / f"{m.name}.sph")
         else:
             save_tree(tree, out_dir / f"{m.name}.npz")
-        leaves.append(tree.n_leaves)
+    leaves = [tree.n_leaves for tree in trees]
     click.echo(f"{len(meshes)} trees ({method}, branching {branching}, depth {depth}, "
-               f"{np.mean(leaves):.0f} leaves on average) in {time.perf_counter() - t0:.2f} s -> {out_dir}")
+               f"{np.mean(leaves):.0f} leaves on average) in {build_s:.2f} s -> {out_dir}")
 
 
 @spheretree.command("eval")

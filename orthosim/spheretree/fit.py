@@ -193,22 +193,29 @@ class _LeafFitter:
         crit = np.any(faces == far_vertex[leaf_of_face][:, None], axis=1)
         crit_count = np.bincount(leaf_of_face[crit], minlength=n)
         movable = (crit_count > 0) & (crit_count < np.bincount(leaf_of_face, minlength=n))
+        if not movable.any():
+            return leaf_of_face
         # A without its critical triangles: the radius it could shrink to.
-        rest = np.where(crit, n, leaf_of_face)
-        rest_pts = vertices[node_vertex_groups(faces, rest, n + 1)[:n]]
+        rest_pts = vertices[node_vertex_groups(faces[~crit], leaf_of_face[~crit], n)]
         r_shrunk = np.where(movable, radii_to_cover(rest_pts, c), r)
-        crit_pts = vertices[node_vertex_groups(faces, np.where(crit, leaf_of_face, n), n + 1)[:n]]  # (n, m, 3)
+        crit_groups = node_vertex_groups(faces[crit], leaf_of_face[crit], n)  # (n, m), -1 rows: no critical face
+        crit_pts = vertices[crit_groups]  # (n, m, 3)
+        crit_mean = np.zeros((n, 3))
+        for i in range(3):
+            crit_mean[:, i] = np.bincount(leaf_of_face[crit], weights=vertices[faces[crit]][:, :, i].mean(axis=1), minlength=n)
+        crit_mean /= np.maximum(crit_count, 1)[:, None]
         k = min(k + 1, n)
-        _, near = cKDTree(c).query(crit_pts.mean(axis=1), k=k)
+        _, near = cKDTree(c).query(crit_mean, k=k)
         near = near.reshape(n, -1)
         need = radii_to_cover_each(crit_pts, c[near])
         r_grown = np.maximum(r[near], need)
         base = self.count(c, r)
         gain_a = self.count(c, r_shrunk) - base  # <= 0
-        grown = self.count(c[near].reshape(-1, 3), r_grown.ravel()).reshape(near.shape) - base[near]
-        delta = grown + gain_a[:, None] + 1e-6 * (r_grown - r[near])
+        delta = np.full(near.shape, np.inf)
+        mv = np.flatnonzero(movable)  # only these have anything to hand over
+        grown = self.count(c[near[mv]].reshape(-1, 3), r_grown[mv].ravel()).reshape(len(mv), -1) - base[near[mv]]
+        delta[mv] = grown + gain_a[mv, None] + 1e-6 * (r_grown[mv] - r[near[mv]])
         delta[near == np.arange(n)[:, None]] = np.inf
-        delta[~movable] = np.inf
         best = delta.argmin(axis=1)
         best_delta = delta[np.arange(n), best]
         target = near[np.arange(n), best]
