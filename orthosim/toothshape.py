@@ -7,7 +7,10 @@ type's incisal edge, cusp tip or cusps and fossae. Single-rooted teeth are that 
 multi-rooted teeth stop the loft at a short root trunk and gain separate roots by a boolean union
 (manifold3d), which keeps the result closed and manifold. A resolution knob sets the number of
 points per ring: 10 gives the paper's coarse teeth (about 125 vertices), 40 smooth ones (a few
-thousand), so the same code serves replication and realistic rendering.
+thousand), so the same code serves replication and realistic rendering. From 40 points per ring
+up, edges longer than 40 / n mm (1 mm for smooth teeth) are split at their midpoints
+(`orthosim.meshrefine`): the surface stays the same, but the long triangles where roots join the
+trunk and near the apex, which would force large leaf spheres on the sphere trees, are gone.
 """
 
 from __future__ import annotations
@@ -20,9 +23,11 @@ from scipy.interpolate import PchipInterpolator
 
 from .anatomy import ToothDimensions
 from .fdi import Arch, ToothType
+from .meshrefine import split_long_edges
 
 TRUNK = 0.85  # root-trunk cross-section over the cervical one, multi-rooted teeth
 RESOLUTIONS = {"coarse": 10, "medium": 20, "smooth": 40, "fine": 64}
+REFINED_FROM = 40  # ring points from which long edges are split, to at most REFINED_FROM / n mm
 
 
 @dataclass(frozen=True)
@@ -265,6 +270,8 @@ def build_tooth_shape(dims: ToothDimensions, arch: Arch, ttype: ToothType, resol
         mesh = trimesh.boolean.union(parts, engine="manifold")
         if mesh.volume < 0:
             mesh.invert()
+    if n >= REFINED_FROM:
+        mesh = trimesh.Trimesh(*split_long_edges(mesh.vertices, mesh.faces, REFINED_FROM / n), process=False)
     landmarks["apex"] = np.array([0.0, -L, 0.0])
     crown_height = float(mesh.vertices[:, 1].max())
     return ToothShape(mesh, crown_height, y_contact, landmarks)
