@@ -35,14 +35,15 @@ def _count_in_spheres(prefix, origin, h, centres, radii):
         r2 = r * r
         i0 = max(int(np.ceil((cx - r - origin[0]) / h)), 0)
         i1 = min(int(np.floor((cx + r - origin[0]) / h)), nx - 1)
-        j0 = max(int(np.ceil((cy - r - origin[1]) / h)), 0)
-        j1 = min(int(np.floor((cy + r - origin[1]) / h)), ny - 1)
         total = 0
         for i in range(i0, i1 + 1):
             dx = origin[0] + h * i - cx
             rx = r2 - dx * dx
             if rx < 0.0:
                 continue
+            ry = np.sqrt(rx)  # the columns of this slice that the sphere crosses
+            j0 = max(int(np.ceil((cy - ry - origin[1]) / h)), 0)
+            j1 = min(int(np.floor((cy + ry - origin[1]) / h)), ny - 1)
             for j in range(j0, j1 + 1):
                 dy = origin[1] + h * j - cy
                 rz = rx - dy * dy
