@@ -26,7 +26,7 @@ All coordinates in mm, in the mesh's frame.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -41,7 +41,6 @@ from .tree import SphereTree
 class FitOptions:
     """Knobs of the optimising builder (defaults tuned on the parametric and real teeth)."""
 
-    medial_pull: float = 0.6  # k-means on x - medial_pull * rho(x) * n(x): 0 surface, 1 medial centres
     medial_pulls: tuple[float, ...] = (0.6, 0.8)  # pulls tried by fit_leaves (the best first fit wins)
     medial_cap_mm: float = 4.0  # rho capped at this depth, mm
     medial_samples: int = 4000  # faces on which rho is estimated
@@ -305,16 +304,21 @@ def _face_geometry(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
     return tri.mean(axis=1), cross / np.maximum(2 * area, 1e-300)[:, None], area
 
 
-def initial_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: FitOptions, rng) -> np.ndarray:
-    """(F,) leaf of each face, 0..L-1 (L <= n_leaves): k-means on medially pulled centroids."""
+def medial_offsets(vertices: np.ndarray, faces: np.ndarray, options: FitOptions, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Per face: centroid (F, 3) mm and the step (F, 3) mm that takes it to the medial axis
+    (rho(x) * n(x), rho capped at `medial_cap_mm`), so x - pull * step is pulled `pull` of the way."""
     centroid, normal, _ = _face_geometry(vertices, faces)
-    if options.medial_pull:
-        # Estimated on a subsample of faces (a smooth field), spread to the rest by nearest face.
-        sub = rng.choice(len(faces), size=min(len(faces), options.medial_samples), replace=False)
-        rho_sub = medial_radii(centroid[sub], normal[sub], vertices, options.medial_cap_mm)
-        rho = rho_sub[cKDTree(centroid[sub]).query(centroid)[1]]
-        centroid = centroid - (options.medial_pull * np.minimum(rho, options.medial_cap_mm))[:, None] * normal
-    return _kmeans(centroid, n_leaves, options.lloyd_iterations, rng)
+    # Estimated on a subsample of faces (a smooth field), spread to the rest by nearest face.
+    sub = rng.choice(len(faces), size=min(len(faces), options.medial_samples), replace=False)
+    rho_sub = medial_radii(centroid[sub], normal[sub], vertices, options.medial_cap_mm)
+    rho = rho_sub[cKDTree(centroid[sub]).query(centroid)[1]]
+    return centroid, np.minimum(rho, options.medial_cap_mm)[:, None] * normal
+
+
+def initial_leaves(centroid: np.ndarray, step: np.ndarray, pull: float, n_leaves: int, options: FitOptions, rng) -> np.ndarray:
+    """(F,) leaf of each face, 0..L-1 (L <= n_leaves): k-means on the centroids pulled toward the
+    medial axis (`medial_offsets`)."""
+    return _kmeans(centroid - pull * step, n_leaves, options.lloyd_iterations, rng)
 
 
 def _compact(leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray):
@@ -355,8 +359,9 @@ def fit_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: 
     # The best pull toward the medial axis depends on the tooth (thin incisors, thick molars):
     # fit each candidate pull once and improve only the partition with the least outside volume.
     best = None
+    centroid, step = medial_offsets(vertices, faces, options, rng)
     for pull in options.medial_pulls:
-        leaf = initial_leaves(vertices, faces, n_leaves - reserve, replace(options, medial_pull=pull), rng)
+        leaf = initial_leaves(centroid, step, pull, n_leaves - reserve, options, rng)
         n = int(leaf.max()) + 1
         c, r = fitter.fit(leaf, n)
         total = float(fitter.count(c, r).sum())
