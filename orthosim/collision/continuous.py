@@ -147,8 +147,9 @@ def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, 
     for _ in range(max_iterations):
         if t >= 1.0:
             return None
-        at(t)
-        d = exact.distance(oa, ob)
+        # the model's remembered distances: a refinement starting at t = 0 asks what the caller
+        # often asked already about the step's start poses
+        d = model.exact_distance(i_a, interpolate_pose(T0a, T1a, t), i_b, interpolate_pose(T0b, T1b, t))
         if d <= 0.0:
             return t
         if t + d / mu >= 1.0:  # the gap cannot close within the step: no contact, by the speed bound

@@ -356,7 +356,9 @@ def _fcl_pair(model: MovementModel, P, pair):
 
 
 def _exact_distance(model: MovementModel, P, pair) -> float:
-    return exact.distance(*_fcl_pair(model, P, pair))
+    a, b = pair
+    idx = model.collision.index
+    return model.collision.exact_distance(idx[a], P[a], idx[b], P[b])
 
 
 def _memo_exact_distance(model: MovementModel, P, pair, memo: dict | None) -> float:
@@ -546,6 +548,16 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
         yield StepRecord(k, k * dt, {n: T.copy() for n, T in P.items()}, moved, tuple(touching), leaves[0], leaves[1],
                          tuple(events), balance, max(0.0, _deepening(depths := penetrations(model, P, depth_memo), initial_depths)), dist,
                          max(depths.values(), default=0.0))
+
+
+def simulate_case(case: Case, detector: str | None = None, steps: int | None = None) -> Iterator[StepRecord]:
+    """`simulate(MovementModel.build(case), detector, steps)`: a whole run from the case alone.
+
+    Everything it needs pickles, so it can run in a child process beside the renderer
+    (`orthosim.background.in_child_process(simulate_case, case, detector)`); the child builds the
+    same model from the same case and yields the same records.
+    """
+    return simulate(MovementModel.build(case), detector, steps)
 
 
 def _scaled(motions: dict[int, Motion], tcut: dict[int, float]) -> dict[int, Motion]:
