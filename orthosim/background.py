@@ -27,6 +27,7 @@ import pickle
 import queue
 import signal
 import threading
+import warnings
 from typing import Any, Callable, Iterable
 
 _ITEM, _END, _ERROR = "item", "end", "error"
@@ -41,12 +42,12 @@ class ChildProcessIterator:
     """
 
     def __init__(self, factory: Callable[..., Iterable], *args: Any, depth: int = 4, name: str = "orthosim-producer",
-                 **kwargs: Any):
+                 ignore_warnings: bool = False, **kwargs: Any):
         ctx = multiprocessing.get_context("spawn")
         self._queue = ctx.Queue(maxsize=max(1, int(depth)))
         self._stop = ctx.Event()
         self._done = False
-        self._process = ctx.Process(target=_produce, args=(factory, args, kwargs, self._queue, self._stop),
+        self._process = ctx.Process(target=_produce, args=(factory, args, kwargs, self._queue, self._stop, ignore_warnings),
                                     name=name, daemon=True)
         # Ctrl-C reaches every process of the terminal's foreground group; the child starts with
         # SIGINT ignored (an ignored signal stays ignored across exec) and this process stops it.
@@ -121,9 +122,14 @@ class ChildProcessIterator:
             self.close()
 
 
-def in_child_process(factory: Callable[..., Iterable], *args: Any, depth: int = 4, **kwargs: Any) -> ChildProcessIterator:
-    """`ChildProcessIterator(factory, *args, depth=depth, **kwargs)`: the items of `factory(...)`, made in a child process."""
-    return ChildProcessIterator(factory, *args, depth=depth, **kwargs)
+def in_child_process(factory: Callable[..., Iterable], *args: Any, depth: int = 4, ignore_warnings: bool = False,
+                     **kwargs: Any) -> ChildProcessIterator:
+    """The items of `factory(*args, **kwargs)`, made in a child process (`ChildProcessIterator`).
+
+    depth: how many items the child may run ahead. ignore_warnings: the child drops Python
+    warnings (when this process does the same work first and reports them once).
+    """
+    return ChildProcessIterator(factory, *args, depth=depth, ignore_warnings=ignore_warnings, **kwargs)
 
 
 def _portable(exc: BaseException) -> bytes:
@@ -136,9 +142,11 @@ def _portable(exc: BaseException) -> bytes:
         return pickle.dumps(RuntimeError(f"{type(exc).__name__}: {exc}"))
 
 
-def _produce(factory, args, kwargs, q, stop) -> None:
+def _produce(factory, args, kwargs, q, stop, ignore_warnings: bool) -> None:
     """The child: run the factory, send its items, then the end or the error."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if ignore_warnings:
+        warnings.simplefilter("ignore")
     parent = os.getppid()
 
     def send(kind: str, payload: bytes) -> bool:

@@ -162,12 +162,12 @@ def _render_variants(dentition, states, size, frames_per_round: int, rounds: int
 
 
 def _simulation(case_obj, dentition, detector: str):
-    """(MovementModel, simulate) when the movement code is present, else (None, reason)."""
+    """(MovementModel, simulate, simulate_case) when the movement code is present, else (None, reason)."""
     try:
-        from orthosim.movement.simulation import MovementModel, simulate
+        from orthosim.movement.simulation import MovementModel, simulate, simulate_case
     except ImportError as exc:
         return None, f"orthosim.movement is not available ({exc})"
-    return (MovementModel.build(case_obj, dentition=dentition), simulate), None
+    return (MovementModel.build(case_obj, dentition=dentition), simulate, simulate_case), None
 
 
 def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool = True, detector: str = "continuous",
@@ -187,6 +187,8 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     (the record's `frames_with_moving_teeth` says how many did).
     """
     import tempfile
+
+    from orthosim.background import in_child_process
 
     from .animation import FrameSink, prefetch
     from .renderer import Renderer
@@ -269,13 +271,14 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     fps_sim = None
     e2e_sim = None
     e2e_interp = None
+    e2e_thread = None
     collision = None
     if case_obj is not None and simulate:
         sim, why = _simulation(case_obj, dentition, detector)
         if sim is None:
             pending["simulation"] = why
         else:
-            movement_model, run = sim
+            movement_model, run, simulate_case = sim
             gen = run(movement_model, detector, steps=n_states)
             sim_times = []
             for i in range(n_states):
@@ -285,10 +288,20 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
                     sim_times.append(time.perf_counter() - t0)
             gen.close()
             fps_sim = _median_fps(sim_times)
-            e2e_sim = end_to_end(FrameState.from_step(rec, extracted)
-                                 for rec in run(movement_model, detector, steps=n_states - 1))
-            e2e_sim["includes"] = [f"simulation step (orthosim.movement, {detector} detector)", "scene update", "draw",
-                                   "colour read-back", *encode]
+            # the pipeline of `orthosim run`: the simulation in a child process (orthosim.background),
+            # running ahead of the drawing through a bounded queue, so that it does not take turns
+            # with the drawing and encoding for this process's GIL
+            sim_steps = f"simulation step (orthosim.movement, {detector} detector)"
+            with in_child_process(simulate_case, case_obj, detector, n_states - 1, ignore_warnings=True) as records:
+                e2e_sim = end_to_end(FrameState.from_step(rec, extracted) for rec in records)
+            e2e_sim["includes"] = [f"{sim_steps} in a child process (orthosim.background), records sent "
+                                   "through a bounded queue", "scene update", "draw", "colour read-back", *encode]
+            # the same with the simulation on a thread of this process (`prefetch` alone, the
+            # pipeline before the child process): what the process buys, measured in this run
+            e2e_thread = end_to_end(FrameState.from_step(rec, extracted)
+                                    for rec in run(movement_model, detector, steps=n_states - 1))
+            e2e_thread["includes"] = [f"{sim_steps} on a thread of the drawing process (animation.prefetch)",
+                                      *e2e_sim["includes"][1:]]
             if frames_per_step > 1:
                 # what `orthosim run` does by default: frames interpolated between steps
                 import itertools
@@ -298,11 +311,12 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
                 # warm up over the same simulation steps as the other figures (a case's first steps,
                 # where collisions are resolved, are much slower than the rest)
                 warm = 1 + (warmup - 1) * frames_per_step
-                steps = frames_from_steps(run(movement_model, detector, steps=n_states), extracted, frames_per_step)
-                e2e_interp = end_to_end(itertools.islice(steps, warm + frames), warm=warm)
+                with in_child_process(simulate_case, case_obj, detector, n_states, ignore_warnings=True) as records:
+                    steps = frames_from_steps(records, extracted, frames_per_step)
+                    e2e_interp = end_to_end(itertools.islice(steps, warm + frames), warm=warm)
                 e2e_interp["frames_per_step"] = frames_per_step
                 e2e_interp["includes"] = [f"one simulation step per {frames_per_step} frames, poses interpolated "
-                                          "between steps (render.timeline, as `orthosim run`)", *e2e_sim["includes"][1:]]
+                                          "between steps (render.timeline, as `orthosim run`)", *e2e_sim["includes"]]
             try:
                 from orthosim.collision.bench import collision_timings
 
@@ -364,6 +378,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         "end_to_end": e2e,
         "end_to_end_synthetic": e2e_synthetic,
         "end_to_end_interpolated": e2e_interp,
+        "end_to_end_simulation_on_thread": e2e_thread,
         "collision_us_per_step": None if collision is None else collision.get("collision_us_per_step"),
         "collision_fps": None if collision is None else {
             k: (1e6 / v if v else None) for k, v in collision.get("collision_us_per_step", {}).items()},

@@ -123,13 +123,18 @@ def _earliest(pair, la, lb, t, leave, first_only):
 
 
 def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, T0b, T1b, t_start: float,
-                           tolerance: float = 0.05, max_iterations: int = 2000) -> float | None:
+                           tolerance: float = 0.05, max_iterations: int = 2000,
+                           distances: exact.DistanceMemo | None = None) -> float | None:
     """Advance a conservative first time of contact on the exact meshes of bodies i_a, i_b.
 
     Returns a time in [t_start, 1) no later than the meshes' first contact (up to FCL's own
     accuracy), within `tolerance` mm of travel of it whenever it returns before `max_iterations`;
-    None when conservative advancement proves the meshes stay apart until t = 1.
+    None when conservative advancement proves the meshes stay apart until t = 1. `distances`: a
+    caller's `exact.DistanceMemo` of this model (a refinement from t = 0 often asks what the caller
+    asked already about the step's start poses); the same answers, fewer FCL queries.
     """
+    if distances is None:
+        distances = exact.DistanceMemo(model.fcl_object, size=16)
     oa, ob = model.fcl_object(i_a), model.fcl_object(i_b)
     # Strides use the bound on how fast the gap can close (relative motion); the tolerance is
     # travel of the teeth themselves, so teeth moving together are still stopped precisely.
@@ -147,9 +152,7 @@ def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, 
     for _ in range(max_iterations):
         if t >= 1.0:
             return None
-        # the model's remembered distances: a refinement starting at t = 0 asks what the caller
-        # often asked already about the step's start poses
-        d = model.exact_distance(i_a, interpolate_pose(T0a, T1a, t), i_b, interpolate_pose(T0b, T1b, t))
+        d = distances(i_a, interpolate_pose(T0a, T1a, t), i_b, interpolate_pose(T0b, T1b, t))
         if d <= 0.0:
             return t
         if t + d / mu >= 1.0:  # the gap cannot close within the step: no contact, by the speed bound

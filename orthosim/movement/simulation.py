@@ -323,11 +323,11 @@ def _vertical_mover(m: Motion | None, point: np.ndarray, dt: float) -> bool:
     return abs(d[1]) > 0.5 * np.hypot(d[0], d[2])
 
 
-def _touching(model: MovementModel, detector: str, P: dict[int, np.ndarray], memo: dict | None = None):
+def _touching(model: MovementModel, detector: str, P: dict[int, np.ndarray], distances: exact.DistanceMemo | None = None):
     """Pairs in contact at poses P with the detector's notion of contact, and the leaves to draw.
 
-    memo: optional {(a, b): (pose a, pose b, exact distance)} kept across steps: a pair neither of
-    whose teeth has moved keeps its exact distance without a new FCL query.
+    distances: the run's memo of exact distances: a pair neither of whose teeth has moved keeps its
+    exact distance without a new FCL query.
     """
     s = model.settings
     pairs = list(model.pairs)
@@ -336,11 +336,11 @@ def _touching(model: MovementModel, detector: str, P: dict[int, np.ndarray], mem
         res = detect_step(model.collision, P, None, pairs, "circles")
         return res.touching_pairs(), empty
     if detector == "exact":
-        return [p for p in pairs if _exact_distance(model, P, p) <= s.touch_tolerance_mm], empty
+        return [p for p in pairs if _exact_distance(model, P, p, distances) <= s.touch_tolerance_mm], empty
     res = detect_step(model.collision, P, None, pairs, "discrete", CollisionRequest(all_leaf_pairs=True))
     touching = res.touching_pairs()
     if detector == "continuous":
-        touching = [p for p in touching if _memo_exact_distance(model, P, p, memo) <= s.touch_tolerance_mm]
+        touching = [p for p in touching if _exact_distance(model, P, p, distances) <= s.touch_tolerance_mm]
     keep = np.isin(res.pair_of_leaf, [i for i, p in enumerate(map(tuple, res.pairs.tolist())) if p in set(touching)])
     centers = np.concatenate([res.centers_a[keep], res.centers_b[keep]])
     radii = np.concatenate([res.radii_a[keep], res.radii_b[keep]])
@@ -355,23 +355,12 @@ def _fcl_pair(model: MovementModel, P, pair):
     return oa, ob
 
 
-def _exact_distance(model: MovementModel, P, pair) -> float:
+def _exact_distance(model: MovementModel, P, pair, distances: exact.DistanceMemo | None = None) -> float:
+    """mm between the exact meshes of the pair at poses P; through the run's memo when given."""
+    if distances is None:
+        return exact.distance(*_fcl_pair(model, P, pair))
     a, b = pair
-    idx = model.collision.index
-    return model.collision.exact_distance(idx[a], P[a], idx[b], P[b])
-
-
-def _memo_exact_distance(model: MovementModel, P, pair, memo: dict | None) -> float:
-    """`_exact_distance`, reused from `memo` while neither tooth of the pair has moved."""
-    a, b = pair
-    if memo is not None and pair in memo:
-        Ta, Tb, d = memo[pair]
-        if np.array_equal(Ta, P[a]) and np.array_equal(Tb, P[b]):
-            return d
-    d = _exact_distance(model, P, pair)
-    if memo is not None:
-        memo[pair] = (P[a].copy(), P[b].copy(), d)
-    return d
+    return distances(model.collision.index[a], P[a], model.collision.index[b], P[b])
 
 
 def penetrations(model: MovementModel, P: Mapping[int, np.ndarray], known: dict | None = None) -> dict[tuple[int, int], float]:
@@ -436,8 +425,9 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
     dt = float(model.case.step_days)
     n_steps = model.case.steps if steps is None else int(steps)
     P = {n: np.asarray(T, float).copy() for n, T in model.dentition.rest_poses().items()}
-    distance_memo: dict = {}
-    touching, leaves = _touching(model, detector, P, distance_memo)
+    # exact distances asked for in the run, each asked of FCL once (a step asks for many twice)
+    distances = exact.DistanceMemo(model.collision.fcl_object)
+    touching, leaves = _touching(model, detector, P, distances)
     dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
     depth_memo: dict = {}
     initial_depths = penetrations(model, P, depth_memo)
@@ -475,7 +465,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
             if detector != "continuous":
                 return _approaching(model, pair, current, dt, centers)
             end = {n: (P1[n] if n in current else P[n]) for n in pair}
-            d0, d1 = _exact_distance(model, P, pair), _exact_distance(model, end, pair)
+            d0, d1 = _exact_distance(model, P, pair, distances), _exact_distance(model, end, pair, distances)
             return d1 <= 0.0 or d1 < d0 - 1e-6
 
         def tested(current: dict[int, Motion], skip: set) -> list[tuple[int, int]]:
@@ -503,7 +493,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                 tested_pairs.update(pairs)
                 if not pairs:
                     break
-                res = detect_step(model.collision, P, P1, pairs, "continuous", request)
+                res = detect_step(model.collision, P, P1, pairs, "continuous", request, distances=distances)
                 hits = [(tuple(map(int, pr)), float(t)) for pr, t in zip(res.pairs, res.time_of_first_contact) if not np.isnan(t)]
                 if not hits:
                     break
@@ -537,7 +527,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
         P = P1
         # 4. contacts, interpenetration, distances
         before = touching_set
-        touching, leaves = _touching(model, detector, P, distance_memo)
+        touching, leaves = _touching(model, detector, P, distances)
         # a moving tooth that made a new contact without a reported hit (it stopped within the
         # touching tolerance) has collided too; teeth sliding over the other arch's have not
         seen = {e.pair for e in events}
