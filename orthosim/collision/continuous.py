@@ -20,7 +20,7 @@ import numpy as np
 from . import exact
 from .descent import compiled_descent, descend, sphere_overlap_test
 from .model import FLOAT32_MARGIN_MM, CollisionModel
-from .motion import chord_deviation_bound, interpolate_pose, max_speed, relative_speed_bound, rotation_angle
+from .motion import PosePath, chord_deviation_bound, max_speed, relative_speed_bound, rotation_angle
 from .time_of_contact import contact_interval, contact_interval_from_dots, min_distance_over_step
 
 
@@ -141,9 +141,11 @@ def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, 
     mu = relative_speed_bound(T0a, T1a, model.rho_max[i_a], T0b, T1b, model.rho_max[i_b])
     travel = max_speed(T0a, T1a, model.rho_max[i_a]) + max_speed(T0b, T1b, model.rho_max[i_b])
 
+    path_a, path_b = PosePath(T0a, T1a), PosePath(T0b, T1b)
+
     def at(t):
-        exact.set_pose(oa, interpolate_pose(T0a, T1a, t))
-        exact.set_pose(ob, interpolate_pose(T0b, T1b, t))
+        exact.set_pose(oa, path_a.at(t))
+        exact.set_pose(ob, path_b.at(t))
 
     t = float(t_start)
     if mu <= 0:
@@ -152,7 +154,7 @@ def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, 
     for _ in range(max_iterations):
         if t >= 1.0:
             return None
-        d = distances(i_a, interpolate_pose(T0a, T1a, t), i_b, interpolate_pose(T0b, T1b, t))
+        d = distances(i_a, path_a.at(t), i_b, path_b.at(t))
         if d <= 0.0:
             return t
         if t + d / mu >= 1.0:  # the gap cannot close within the step: no contact, by the speed bound

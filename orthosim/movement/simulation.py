@@ -135,6 +135,7 @@ class MovementModel:
     pairs: tuple[tuple[int, int], ...] = ()  # broad phase: arch neighbours, then facing pairs
     facing: frozenset[tuple[int, int]] = field(default_factory=frozenset)
     total_mass_g: float = 0.0
+    arch_orders: dict[F.Arch, list[int]] = field(default_factory=dict)  # present teeth, right to left
 
     @classmethod
     def build(cls, case: Case, dentition: Dentition | None = None, collision: CollisionModel | None = None,
@@ -149,7 +150,9 @@ class MovementModel:
         neighbours = set(dentition.adjacent_pairs(set(extracted)))
         facing = frozenset(p for p in pairs if tuple(p) not in neighbours)
         mech = {n: build_mechanics(dentition.teeth[n], settings.resistance_rule, settings.resistance_fraction) for n in present}
-        return cls(case, dentition, collision, mech, settings, extracted, present, tuple(map(tuple, pairs)), facing)
+        orders = {arch: [t for t in F.arch_order(arch, set(dentition.teeth)) if t not in extracted] for arch in F.Arch}
+        return cls(case, dentition, collision, mech, settings, extracted, present, tuple(map(tuple, pairs)), facing,
+                   arch_orders=orders)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -168,16 +171,29 @@ def _horizontal(v: np.ndarray) -> np.ndarray:
     return h / n if n > 0 else h
 
 
-def arch_direction(model: MovementModel, poses: Mapping[int, np.ndarray], fdi: int, direction: str) -> np.ndarray:
+def _present_in_arch(model: MovementModel, fdi: int) -> list[int]:
+    """Present teeth of fdi's arch, right distal end to left distal end."""
+    arch = F.arch_of(fdi)
+    order = model.arch_orders.get(arch)
+    if order is None:
+        order = [t for t in F.arch_order(arch, set(model.dentition.teeth)) if t not in model.extracted]
+    return order
+
+
+def arch_direction(model: MovementModel, poses: Mapping[int, np.ndarray], fdi: int, direction: str,
+                   centers: Mapping[int, np.ndarray] | None = None) -> np.ndarray:
     """(3,) unit arch-frame vector 'mesial' or 'distal' for a tooth at `poses`: toward the crown centre
     of the next present tooth that way along the arch (the paper's director vector), or along the
-    tooth's own mesiodistal axis at the end of the arch."""
-    order = [t for t in F.arch_order(F.arch_of(fdi), set(model.dentition.teeth)) if t not in model.extracted]
+    tooth's own mesiodistal axis at the end of the arch. centers: the crown centres at `poses`
+    (`_crown_centers`) when the caller has them."""
+    order = _present_in_arch(model, fdi)
     i = order.index(fdi)
     j = i + _arch_step(fdi, direction)
     tooth = model.dentition.teeth[fdi]
     R = poses[fdi][:3, :3]
     if 0 <= j < len(order):
+        if centers is not None:
+            return _horizontal(centers[order[j]] - centers[fdi])
         other = model.dentition.teeth[order[j]]
         c_other = other.to_world(other.crown_center, poses[order[j]])
         return _horizontal(c_other - tooth.to_world(tooth.crown_center, poses[fdi]))
@@ -185,8 +201,10 @@ def arch_direction(model: MovementModel, poses: Mapping[int, np.ndarray], fdi: i
     return _horizontal(sign * (R @ tooth.mesial))
 
 
-def load_vectors(model: MovementModel, poses: Mapping[int, np.ndarray], load: Load, fdi: int):
-    """(force (3,) cN, point (3,) mm, couple (3,) cN*mm) of one load on one tooth, arch frame, at `poses`."""
+def load_vectors(model: MovementModel, poses: Mapping[int, np.ndarray], load: Load, fdi: int,
+                 centers: Mapping[int, np.ndarray] | None = None):
+    """(force (3,) cN, point (3,) mm, couple (3,) cN*mm) of one load on one tooth, arch frame, at `poses`
+    (centers: the crown centres at `poses`, when the caller has them)."""
     tooth = model.dentition.teeth[fdi]
     mech = model.mechanics[fdi]
     R, p = poses[fdi][:3, :3], poses[fdi][:3, 3]
@@ -197,9 +215,9 @@ def load_vectors(model: MovementModel, poses: Mapping[int, np.ndarray], load: Lo
         d = "apical"
     if isinstance(d, str):
         if d in ("mesial", "distal"):
-            u = arch_direction(model, poses, fdi, d)
+            u = arch_direction(model, poses, fdi, d, centers)
         elif d in ("labial", "lingual"):
-            t = arch_direction(model, poses, fdi, "mesial")
+            t = arch_direction(model, poses, fdi, "mesial", centers)
             u = _horizontal(np.cross(t, [0.0, 1.0, 0.0]))
             if u @ (R @ tooth.labial) < 0:
                 u = -u
@@ -233,7 +251,7 @@ def _normal(model: MovementModel, pair: tuple[int, int], centers: Mapping[int, n
     return _horizontal(centers[b] - centers[a])
 
 
-def _onward(model: MovementModel, poses, touching) -> dict[tuple[int, int], np.ndarray]:
+def _onward(model: MovementModel, poses, touching, centers=None) -> dict[tuple[int, int], np.ndarray]:
     """(pusher, pushed) -> direction of the force the pushed tooth receives: along the arch, toward
     its own next tooth away from the pusher (the paper's director vector); occlusal pairs: none
     (the contact normal, vertical, is used)."""
@@ -245,7 +263,7 @@ def _onward(model: MovementModel, poses, touching) -> dict[tuple[int, int], np.n
         ia, ib = order.index(a), order.index(b)
         for i, j, step in ((a, b, np.sign(ib - ia)), (b, a, np.sign(ia - ib))):
             way = "mesial" if step == _arch_step(j, "mesial") else "distal"
-            out[(i, j)] = arch_direction(model, poses, j, way)
+            out[(i, j)] = arch_direction(model, poses, j, way, centers)
     return out
 
 
@@ -442,12 +460,12 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                 load.movement == "auto" and load.moment_cNmm == 0.0)
             for n in load.teeth:
                 if n in model.mechanics:
-                    loads_on.setdefault(n, []).append((*load_vectors(model, P, load, n), bodily))
+                    loads_on.setdefault(n, []).append((*load_vectors(model, P, load, n, centers), bodily))
         applied = {n: sum((f for f, *_ in v), np.zeros(3)) for n, v in loads_on.items()}
         contacts = [(a, b, _normal(model, (a, b), centers)) for a, b in touching]
         balance = propagate(applied, contacts, s.force_share,
                             lambda n, f: n in model.mechanics and s.rate.moves(f, model.mechanics[n].root_area_mm2),
-                            _onward(model, P, touching))
+                            _onward(model, P, touching, centers))
         # 2. motions and intended end poses
         motions = _motions(model, P, balance, loads_on, dt, centers)
         P1 = dict(P)
