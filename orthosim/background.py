@@ -8,9 +8,12 @@ Why a process and not a thread: a simulation step is mostly Python and FCL calls
 GIL, and so is much of updating the scene and feeding the encoders; on a thread the two take turns
 instead of running on two cores. The child runs `factory(*args, **kwargs)` and sends each item it
 yields, pickled, through a bounded queue, so it runs at most `depth` items ahead and memory stays
-bounded. `factory` and its arguments must be picklable (a module-level function; the child is
+bounded. `factory` and its arguments must be picklable (a module-level function). The child is
 started with "spawn", a fresh interpreter, which is safe whatever threads or OpenGL contexts this
-process holds).
+process holds; as with any spawned child, the main module must be importable again without
+side effects (the `orthosim` command, `python -c`, `-m`, or a script whose work sits under
+`if __name__ == "__main__":`), and multiprocessing keeps its resource-tracker helper process
+until this one exits.
 
 Errors: an exception raised in the child is raised again in the consumer, as the same type with the
 same message (an `OrthosimError` stays one, and the CLI prints it as one line); a child that dies
@@ -119,7 +122,10 @@ class ChildProcessIterator:
 
     def __del__(self):
         if hasattr(self, "_process"):
-            self.close()
+            try:
+                self.close()
+            except Exception:  # e.g. at interpreter exit, where multiprocessing stops its children itself
+                pass
 
 
 def in_child_process(factory: Callable[..., Iterable], *args: Any, depth: int = 4, ignore_warnings: bool = False,

@@ -8,13 +8,18 @@ machine does not move the figure; the end-to-end records also give frames / tota
     (`orthosim.collision.bench.collision_timings`), and the same as fps;
   - render: draw plus colour read-back of one 640x480 frame, the scene already updated, with
     `SyntheticMotion` (all 28 teeth, 2,000 markers: the issue's worst case);
-  - end_to_end: the pipeline `render_run` uses, frame to frame: the next step simulated on a
-    thread (`animation.prefetch`) while this one updates the scene, renders, reads back, and
-    encodes (MP4 always, PNG frames unless disabled) on the background encoders of
-    `animation.FrameSink`, whose bounded queues make the loop wait for them;
-    `end_to_end_synthetic` is the same with `SyntheticMotion` instead of the simulation, and
-    `end_to_end_interpolated` the same with `frames_per_step` frames per simulation step (poses
-    interpolated between steps, `render.timeline`), which is what `orthosim run` writes;
+  - end_to_end: the pipeline `orthosim run` uses, frame to frame, one frame per simulation step:
+    the case simulated with the continuous detector in a child process
+    (`orthosim.background.in_child_process`, as `cli._run_case` does), its records sent through a
+    bounded queue and taken off it on a thread (`animation.prefetch`) while this process updates
+    the scene, renders, reads back, and encodes (MP4 always, PNG frames unless disabled) on the
+    background encoders of `animation.FrameSink`, whose bounded queues make the loop wait for
+    them; `end_to_end_simulation_on_thread` is the same with the simulation on that thread of
+    this process instead (the pipeline before the child process, sharing one GIL with the
+    drawing), `end_to_end_synthetic` the same with `SyntheticMotion` instead of the simulation,
+    and `end_to_end_interpolated` the same as end_to_end with `frames_per_step` frames per
+    simulation step (poses interpolated between steps, `render.timeline`), which is what
+    `orthosim run` writes by default;
   - render_variants: the same render with each optimisation undone in turn, measured
     round-robin in the same run so that the ratios stand even when the absolute figures wander
     with the machine's load;
@@ -232,9 +237,10 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
             render_times.append(time.perf_counter() - t0)
 
     def end_to_end(state_iter, warm: int = warmup) -> dict:
-        """Frame-to-frame wall time of the pipeline `render_run` uses: states produced one ahead
-        on a thread (`prefetch`), scene update, render, read back, encode on the sink's threads."""
-        times, markers, moving = [], [], []
+        """Frame-to-frame wall time of the pipeline `render_run` uses: states taken ahead on a
+        thread (`prefetch`; from a child process when `state_iter` reads one), scene update,
+        render, read back, encode on the sink's threads."""
+        times, markers, drawn, moving = [], [], [], []
         tmp_ctx = tempfile.TemporaryDirectory(prefix="orthosim-bench-") if work_dir is None else None
         out_dir = Path(work_dir) if work_dir is not None else Path(tmp_ctx.name)
         sink = FrameSink(out_dir, png=png, mp4=True)
@@ -246,6 +252,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
             if i >= warm:
                 times.append(now - t_prev)
                 markers.append(st.n_contacts)
+                drawn.append(len(scene.markers.positions) if st.n_contacts else 0)
                 moving.append(len(st.moving))
             t_prev = now
             if i == warm - 1:
@@ -258,6 +265,8 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
             tmp_ctx.cleanup()
         return {"fps": _median_fps(times), "fps_overall_including_encoder_drain": overall, "mp4_bytes": mp4_bytes,
                 "markers_per_frame": {"median": float(np.median(markers)), "max": int(max(markers))},
+                # a sphere the state lists several times is drawn once (DentitionScene.unique_markers)
+                "distinct_markers_drawn_per_frame": {"median": float(np.median(drawn)), "max": int(max(drawn))},
                 # share of the measured frames in which some tooth moved: a case that has come to
                 # rest draws (cheaply) the same teeth again, so read the fps with this beside it
                 "frames_with_moving_teeth": float(np.mean([m > 0 for m in moving]))}
