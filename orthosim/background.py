@@ -4,6 +4,11 @@
         for record in records:      # the same items, in the same order, as simulate_case(case, ...)
             ...
 
+    child = ChildProcessIterator(preload=["orthosim.movement.simulation"])  # starts importing now
+    dentition = case.build_dentition()                                      # meanwhile, here
+    with child.submit(simulate_case, case, "continuous", dentition=dentition) as records:
+        ...
+
 Why a process and not a thread: a simulation step is mostly Python and FCL calls that hold the
 GIL, and so is much of updating the scene and feeding the encoders; on a thread the two take turns
 instead of running on two cores. The child runs `factory(*args, **kwargs)` and sends each item it
@@ -24,6 +29,7 @@ left behind; Ctrl-C is left to this process (the child ignores SIGINT and is sto
 
 from __future__ import annotations
 
+import importlib
 import multiprocessing
 import os
 import pickle
@@ -31,7 +37,7 @@ import queue
 import signal
 import threading
 import warnings
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Sequence
 
 _ITEM, _END, _ERROR = "item", "end", "error"
 _POLL_S = 0.1  # how often a waiting side checks whether the other has gone
@@ -40,17 +46,22 @@ _POLL_S = 0.1  # how often a waiting side checks whether the other has gone
 class ChildProcessIterator:
     """Iterator over the items `factory(*args, **kwargs)` yields in a child process (see the module doc).
 
-    The child starts at construction, so its set-up (imports, building the model) overlaps with
-    whatever the caller does before the first `next`. Use it as a context manager, or call `close`.
+    Two stages, so that the child's start-up overlaps with the caller's own set-up: construction
+    starts the child, which imports the `preload` modules (seconds for numpy, trimesh, FCL and
+    numba) and waits; `submit` then gives it its work, whose arguments may be things the caller
+    built meanwhile (a dentition). `in_child_process` does both at once. Use it as a context
+    manager, or call `close`.
     """
 
-    def __init__(self, factory: Callable[..., Iterable], *args: Any, depth: int = 4, name: str = "orthosim-producer",
-                 ignore_warnings: bool = False, **kwargs: Any):
+    def __init__(self, *, depth: int = 4, name: str = "orthosim-producer", ignore_warnings: bool = False,
+                 preload: Sequence[str] = ()):
         ctx = multiprocessing.get_context("spawn")
         self._queue = ctx.Queue(maxsize=max(1, int(depth)))
         self._stop = ctx.Event()
         self._done = False
-        self._process = ctx.Process(target=_produce, args=(factory, args, kwargs, self._queue, self._stop, ignore_warnings),
+        self._sender: threading.Thread | None = None
+        work_in, self._work = ctx.Pipe(duplex=False)
+        self._process = ctx.Process(target=_produce, args=(work_in, self._queue, self._stop, ignore_warnings, tuple(preload)),
                                     name=name, daemon=True)
         # Ctrl-C reaches every process of the terminal's foreground group; the child starts with
         # SIGINT ignored (an ignored signal stays ignored across exec) and this process stops it.
@@ -61,6 +72,28 @@ class ChildProcessIterator:
         finally:
             if main_thread:
                 signal.signal(signal.SIGINT, previous)
+            work_in.close()  # the child's end
+
+    def submit(self, factory: Callable[..., Iterable], *args: Any, **kwargs: Any) -> "ChildProcessIterator":
+        """Have the child run `factory(*args, **kwargs)` and send its items; once per child.
+
+        The work is pickled here (an argument that cannot be pickled raises here) and written to
+        the child on a thread: a large argument does not hold the caller up while the child is
+        still importing.
+        """
+        if self._sender is not None:
+            raise RuntimeError("this child process has its work already")
+        data = pickle.dumps((factory, args, kwargs), protocol=pickle.HIGHEST_PROTOCOL)
+
+        def send():
+            try:
+                self._work.send_bytes(data)
+            except OSError:  # the child is gone; __next__ reports how
+                pass
+
+        self._sender = threading.Thread(target=send, name=f"{self._process.name}-submit", daemon=True)
+        self._sender.start()
+        return self
 
     @property
     def pid(self) -> int | None:
@@ -72,6 +105,8 @@ class ChildProcessIterator:
     def __next__(self):
         if self._done:
             raise StopIteration
+        if self._sender is None:
+            raise RuntimeError("submit the child's work before reading its items")
         while True:
             try:
                 kind, payload = self._queue.get(timeout=_POLL_S)
@@ -103,7 +138,10 @@ class ChildProcessIterator:
         self._done = True
         proc = self._process
         self._stop.set()
+        self._work.close()  # a child still waiting for its work sees the end of the pipe and exits
         if proc.pid is not None:
+            if self._sender is None:
+                proc.terminate()  # no work given: it is only importing, nothing to finish
             proc.join(timeout=1.0)  # it notices the stop when it next sends, within one item
             if proc.exitcode is None:
                 proc.terminate()  # e.g. still building its model
@@ -135,7 +173,7 @@ def in_child_process(factory: Callable[..., Iterable], *args: Any, depth: int = 
     depth: how many items the child may run ahead. ignore_warnings: the child drops Python
     warnings (when this process does the same work first and reports them once).
     """
-    return ChildProcessIterator(factory, *args, depth=depth, ignore_warnings=ignore_warnings, **kwargs)
+    return ChildProcessIterator(depth=depth, ignore_warnings=ignore_warnings).submit(factory, *args, **kwargs)
 
 
 def _portable(exc: BaseException) -> bytes:
@@ -148,8 +186,8 @@ def _portable(exc: BaseException) -> bytes:
         return pickle.dumps(RuntimeError(f"{type(exc).__name__}: {exc}"))
 
 
-def _produce(factory, args, kwargs, q, stop, ignore_warnings: bool) -> None:
-    """The child: run the factory, send its items, then the end or the error."""
+def _produce(work, q, stop, ignore_warnings: bool, preload: tuple[str, ...]) -> None:
+    """The child: import, wait for the work, run the factory, send its items, then the end or the error."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if ignore_warnings:
         warnings.simplefilter("ignore")
@@ -166,6 +204,14 @@ def _produce(factory, args, kwargs, q, stop, ignore_warnings: bool) -> None:
         return False
 
     try:
+        for module in preload:
+            importlib.import_module(module)
+        try:
+            factory, args, kwargs = pickle.loads(work.recv_bytes())
+        except EOFError:  # closed before it gave any work
+            return
+        finally:
+            work.close()
         items = iter(factory(*args, **kwargs))
         try:
             for item in items:

@@ -175,21 +175,23 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
     detector = detector or case.detector
     started = time.perf_counter()
     with ExitStack() as stack:
-        if render_opts.get("no_render"):
-            steps = None
-        else:  # started first, so that it builds its model while this process builds its own
-            from .background import in_child_process
+        child = None
+        if not render_opts.get("no_render"):
+            from .background import ChildProcessIterator
 
-            # it drops warnings: building the same model here reports them once, as one line each
-            steps = stack.enter_context(in_child_process(simulate_case, case, detector, ignore_warnings=True))
+            # started first: it imports (seconds) while this process builds the model
+            child = stack.enter_context(ChildProcessIterator(ignore_warnings=True,
+                                                             preload=("orthosim.movement.simulation",)))
         model = MovementModel.build(case)
         dent, extracted = model.dentition, set(case.extractions)
         report = RunReport(model, detector)
         extra: dict = {"model": {"description": dent.description, **dent.info}, "simulated": True}
-        if steps is None:
+        if child is None:
             for _ in report.collect(simulate(model, detector)):
                 pass
         else:
+            # the child gets the dentition built here rather than building it again
+            steps = child.submit(simulate_case, case, detector, dentition=dent)
             extra.update(_render_steps(dent, report.collect(steps), extracted, out_dir, render_opts))
     extra["occlusion"] = occlusion_summary(dent)  # the initial model's
     extra["occlusion_final"] = occlusion_summary(dent, {n: report.last.poses[n] for n in dent.fdis})

@@ -301,7 +301,8 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
             # running ahead of the drawing through a bounded queue, so that it does not take turns
             # with the drawing and encoding for this process's GIL
             sim_steps = f"simulation step (orthosim.movement, {detector} detector)"
-            with in_child_process(simulate_case, case_obj, detector, n_states - 1, ignore_warnings=True) as records:
+            with in_child_process(simulate_case, case_obj, detector, n_states - 1, dentition=dentition,
+                                  ignore_warnings=True) as records:
                 e2e_sim = end_to_end(FrameState.from_step(rec, extracted) for rec in records)
             e2e_sim["includes"] = [f"{sim_steps} in a child process (orthosim.background), records sent "
                                    "through a bounded queue", "scene update", "draw", "colour read-back", *encode]
@@ -320,7 +321,8 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
                 # warm up over the same simulation steps as the other figures (a case's first steps,
                 # where collisions are resolved, are much slower than the rest)
                 warm = 1 + (warmup - 1) * frames_per_step
-                with in_child_process(simulate_case, case_obj, detector, n_states, ignore_warnings=True) as records:
+                with in_child_process(simulate_case, case_obj, detector, n_states, dentition=dentition,
+                                      ignore_warnings=True) as records:
                     steps = frames_from_steps(records, extracted, frames_per_step)
                     e2e_interp = end_to_end(itertools.islice(steps, warm + frames), warm=warm)
                 e2e_interp["frames_per_step"] = frames_per_step

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orthosim.background import in_child_process
+from orthosim.background import ChildProcessIterator, in_child_process
 from orthosim.case import DEFAULT_CASE, load_case
 from orthosim.collision import exact
 from orthosim.errors import CaseError
@@ -40,10 +40,13 @@ def test_items_arrive_in_order_and_the_child_is_reaped_at_the_end():
     assert _gone(pid)
 
 
-def test_a_child_simulation_yields_the_same_records_as_the_simulation_in_this_process():
+@pytest.mark.parametrize("dentition_sent", [True, False], ids=["dentition sent, as orthosim run", "built in the child"])
+def test_a_child_simulation_yields_the_same_records_as_the_simulation_in_this_process(dentition_sent):
     case = load_case(DEFAULT_CASE)  # the paper's case 1, whose teeth move and collide
-    here = list(simulate(MovementModel.build(case), "continuous"))
-    with in_child_process(simulate_case, case, "continuous") as records:
+    child = ChildProcessIterator(preload=["orthosim.movement.simulation"])
+    model = MovementModel.build(case)
+    here = list(simulate(model, "continuous"))
+    with child.submit(simulate_case, case, "continuous", dentition=model.dentition if dentition_sent else None) as records:
         there = list(records)
     assert [r.step for r in there] == [r.step for r in here] == list(range(case.steps + 1))
     assert any(r.moving for r in here) and any(r.collisions for r in here)
@@ -87,6 +90,13 @@ def test_stopping_early_or_failing_in_the_consumer_stops_the_child():
                 if x[0] == 3:
                     1 / 0
     assert _gone(pid)
+
+
+def test_a_child_given_no_work_is_stopped_at_once():
+    started = time.monotonic()
+    with ChildProcessIterator(preload=["numpy"]) as child:
+        pid = child.pid
+    assert _gone(pid) and time.monotonic() - started < 5
 
 
 def test_a_child_that_dies_is_reported_instead_of_waited_for():

@@ -558,14 +558,16 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                          max(depths.values(), default=0.0))
 
 
-def simulate_case(case: Case, detector: str | None = None, steps: int | None = None) -> Iterator[StepRecord]:
-    """`simulate(MovementModel.build(case), detector, steps)`: a whole run from the case alone.
+def simulate_case(case: Case, detector: str | None = None, steps: int | None = None,
+                  dentition: Dentition | None = None) -> Iterator[StepRecord]:
+    """`simulate(MovementModel.build(case, dentition), detector, steps)`: a whole run from the case
+    (and its dentition, when the caller has built it already: building one takes seconds).
 
     Everything it needs pickles, so it can run in a child process beside the renderer
     (`orthosim.background.in_child_process(simulate_case, case, detector)`); the child builds the
     same model from the same case and yields the same records.
     """
-    return simulate(MovementModel.build(case), detector, steps)
+    return simulate(MovementModel.build(case, dentition=dentition), detector, steps)
 
 
 def _scaled(motions: dict[int, Motion], tcut: dict[int, float]) -> dict[int, Motion]:
