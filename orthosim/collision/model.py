@@ -8,7 +8,6 @@ numpy. A step's state is just the poses (dict FDI -> (4, 4) local -> arch frame,
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Callable, Mapping
 
@@ -24,13 +23,6 @@ from .contract import CollisionError
 # mm added to radii in float32 tests: float32 rounding of arch-frame coordinates (|x| < 100 mm)
 # is below 1e-5 mm, so this keeps every test conservative.
 FLOAT32_MARGIN_MM = 1e-4
-
-# exact distances remembered by `CollisionModel.exact_distance` (a few hundred are asked for in a step)
-DISTANCE_MEMO_SIZE = 4096
-
-
-def _pose_bytes(T: np.ndarray) -> bytes:
-    return np.ascontiguousarray(T, dtype=np.float64).tobytes()
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,7 +107,6 @@ class CollisionModel:
         self._circle = _circle_data(self.bodies)
         self.rho_max = np.array([np.linalg.norm(b.mesh.vertices, axis=1).max() for b in self.bodies])
         self._fcl: dict[int, object] = {}
-        self._distances: OrderedDict[tuple, float] = OrderedDict()
 
     def roots(self, body_idx: np.ndarray) -> np.ndarray:
         """Flat node index of the root of each body."""
@@ -199,30 +190,6 @@ class CollisionModel:
             obj = fcl_object(self.bodies[i].mesh)
             self._fcl[i] = obj
         return obj
-
-    def exact_distance(self, i_a: int, pose_a: np.ndarray, i_b: int, pose_b: np.ndarray) -> float:
-        """mm between the meshes of bodies i_a and i_b at (4, 4) poses (`exact.distance`, 0 when they
-        intersect), each query answered by FCL once.
-
-        Why: a simulation step asks for the same distance several times (a touching pair before and
-        after its motion, again in each detection round, again when the time of contact is refined
-        from t = 0 and when the step's contacts are listed): two thirds of its FCL distance queries
-        were repeats. The distance is a function of the two meshes and the two poses alone, so the
-        answer is kept under the poses' exact bytes (a pose off by one ulp is a new query) and is
-        the very number FCL gave; the oldest answers are dropped beyond `DISTANCE_MEMO_SIZE`.
-        """
-        key = (i_a, i_b, _pose_bytes(pose_a), _pose_bytes(pose_b))
-        d = self._distances.get(key)
-        if d is None:
-            from . import exact
-
-            oa, ob = self.fcl_object(i_a), self.fcl_object(i_b)
-            exact.set_pose(oa, pose_a)
-            exact.set_pose(ob, pose_b)
-            d = self._distances[key] = exact.distance(oa, ob)
-            if len(self._distances) > DISTANCE_MEMO_SIZE:
-                self._distances.popitem(last=False)
-        return d
 
     @classmethod
     def from_dentition(cls, dentition, tree_builder: Callable[[trimesh.Trimesh], SphereTree] | None = None,
