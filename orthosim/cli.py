@@ -164,25 +164,41 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
 
 def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> None:
     """Simulate the case (orthosim.movement), draw its steps unless --no-render, write
-    out_dir/metrics.json and out_dir/distances.csv."""
+    out_dir/metrics.json and out_dir/distances.csv.
+
+    When drawing, the simulation runs in a child process (`orthosim.background`) that sends its
+    records through a bounded queue: it computes the next steps while this process draws and
+    encodes, on the other core, instead of taking turns with them for one GIL.
+    """
+    from contextlib import ExitStack
+
     from .case import load_case
     from .metrics import occlusion_summary
     from .movement.report import RunReport
-    from .movement.simulation import MovementModel, simulate
+    from .movement.simulation import MovementModel, simulate, simulate_case
 
     case = load_case(case_path)
     detector = detector or case.detector
     started = time.perf_counter()
-    model = MovementModel.build(case)
-    dent, extracted = model.dentition, set(case.extractions)
-    report = RunReport(model, detector)
-    records = report.collect(simulate(model, detector))
-    extra: dict = {"model": {"description": dent.description, **dent.info}, "simulated": True}
-    if render_opts.get("no_render"):
-        for _ in records:
-            pass
-    else:
-        extra.update(_render_steps(dent, records, extracted, out_dir, render_opts))
+    with ExitStack() as stack:
+        child = None
+        if not render_opts.get("no_render"):
+            from .background import ChildProcessIterator
+
+            # started first: it imports (seconds) while this process builds the model
+            child = stack.enter_context(ChildProcessIterator(ignore_warnings=True,
+                                                             preload=("orthosim.movement.simulation",)))
+        model = MovementModel.build(case)
+        dent, extracted = model.dentition, set(case.extractions)
+        report = RunReport(model, detector)
+        extra: dict = {"model": {"description": dent.description, **dent.info}, "simulated": True}
+        if child is None:
+            for _ in report.collect(simulate(model, detector)):
+                pass
+        else:
+            # the child gets the dentition built here rather than building it again
+            steps = child.submit(simulate_case, case, detector, dentition=dent)
+            extra.update(_render_steps(dent, report.collect(steps), extracted, out_dir, render_opts))
     extra["occlusion"] = occlusion_summary(dent)  # the initial model's
     extra["occlusion_final"] = occlusion_summary(dent, {n: report.last.poses[n] for n in dent.fdis})
     extra["wall_s"] = time.perf_counter() - started

@@ -21,6 +21,11 @@ class OrthosimError(Exception):
         self.fix = fix
         super().__init__(self._format())
 
+    def __reduce__(self):
+        # rebuilt from its parts, so that an error raised in a child process (`orthosim.background`)
+        # reaches the CLI as the same type with the same one-line message
+        return (type(self), (self.where, self.field, self.problem, self.fix))
+
     def _format(self) -> str:
         parts = []
         if self.where:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import os
 import queue
+import signal
 import sys
 import threading
 import time
@@ -249,6 +250,33 @@ def prefetch(items: Iterable, depth: int = 2) -> Iterator:
         worker.join(timeout=5)
 
 
+@contextlib.contextmanager
+def _interrupt_between_frames():
+    """Ctrl-C (SIGINT) raises KeyboardInterrupt where the caller checks, between frames.
+
+    Why: raised wherever it lands, it may land inside an OpenGL call, whose ctypes argument
+    conversion turns it into a `ctypes.ArgumentError` (a traceback instead of the CLI's one line),
+    or inside an object's finalizer, where Python drops it and the run goes on. Yields the check;
+    leaving the block checks once more. Main thread only (elsewhere the check does nothing).
+    """
+    caught: list[int] = []
+
+    def check():
+        if caught:
+            caught.clear()
+            raise KeyboardInterrupt
+
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield lambda: None  # not ours to change (another thread, or the caller handles Ctrl-C itself)
+        return
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield check
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    check()
+
+
 class _Progress:
     """tqdm bar shown only on a terminal and only once the run has lasted a second."""
 
@@ -274,6 +302,10 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
                hide_roots: bool = False, color_contact_faces: bool = False, png: bool = True, mp4: bool = True) -> dict:
     """Render every state in `frames` into out_dir (frames/NNNNN.png, animation.mp4, animation.gif).
 
+    `frames` is taken ahead on a thread (`prefetch`); `orthosim run` feeds it the records of a
+    simulation running in a child process (`orthosim.background`), so that simulating the next
+    steps and drawing this one use both cores instead of taking turns for one GIL.
+
     Returns {"frames": n, "fps": end-to-end frames per second (render, read back, encode, write),
     "render_fps": ..., "views": [...], "size": [w, h], ...}. The caller records it in metrics.json.
     """
@@ -289,7 +321,7 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
     render_s = 0.0
     n = 0
     try:
-        with Renderer(size, alpha=alpha) as renderer:
+        with Renderer(size, alpha=alpha) as renderer, _interrupt_between_frames() as interrupted:
             started = time.perf_counter()
             for state in prefetch(frames):
                 t0 = time.perf_counter()
@@ -299,6 +331,8 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
                 sink.add(tile(images))
                 n += 1
                 bar.update(n, n / max(time.perf_counter() - started, 1e-9))
+                interrupted()
+            interrupted()
             written = sink.close()
             elapsed = time.perf_counter() - started
             gl_renderer = renderer.gl_renderer

@@ -8,13 +8,18 @@ machine does not move the figure; the end-to-end records also give frames / tota
     (`orthosim.collision.bench.collision_timings`), and the same as fps;
   - render: draw plus colour read-back of one 640x480 frame, the scene already updated, with
     `SyntheticMotion` (all 28 teeth, 2,000 markers: the issue's worst case);
-  - end_to_end: the pipeline `render_run` uses, frame to frame: the next step simulated on a
-    thread (`animation.prefetch`) while this one updates the scene, renders, reads back, and
-    encodes (MP4 always, PNG frames unless disabled) on the background encoders of
-    `animation.FrameSink`, whose bounded queues make the loop wait for them;
-    `end_to_end_synthetic` is the same with `SyntheticMotion` instead of the simulation, and
-    `end_to_end_interpolated` the same with `frames_per_step` frames per simulation step (poses
-    interpolated between steps, `render.timeline`), which is what `orthosim run` writes;
+  - end_to_end: the pipeline `orthosim run` uses, frame to frame, one frame per simulation step:
+    the case simulated with the continuous detector in a child process
+    (`orthosim.background.in_child_process`, as `cli._run_case` does), its records sent through a
+    bounded queue and taken off it on a thread (`animation.prefetch`) while this process updates
+    the scene, renders, reads back, and encodes (MP4 always, PNG frames unless disabled) on the
+    background encoders of `animation.FrameSink`, whose bounded queues make the loop wait for
+    them; `end_to_end_simulation_on_thread` is the same with the simulation on that thread of
+    this process instead (the pipeline before the child process, sharing one GIL with the
+    drawing), `end_to_end_synthetic` the same with `SyntheticMotion` instead of the simulation,
+    and `end_to_end_interpolated` the same as end_to_end with `frames_per_step` frames per
+    simulation step (poses interpolated between steps, `render.timeline`), which is what
+    `orthosim run` writes by default;
   - render_variants: the same render with each optimisation undone in turn, measured
     round-robin in the same run so that the ratios stand even when the absolute figures wander
     with the machine's load;
@@ -165,12 +170,12 @@ def _render_variants(dentition, states, size, frames_per_round: int, rounds: int
 
 
 def _simulation(case_obj, dentition, detector: str):
-    """(MovementModel, simulate) when the movement code is present, else (None, reason)."""
+    """(MovementModel, simulate, simulate_case) when the movement code is present, else (None, reason)."""
     try:
-        from orthosim.movement.simulation import MovementModel, simulate
+        from orthosim.movement.simulation import MovementModel, simulate, simulate_case
     except ImportError as exc:
         return None, f"orthosim.movement is not available ({exc})"
-    return (MovementModel.build(case_obj, dentition=dentition), simulate), None
+    return (MovementModel.build(case_obj, dentition=dentition), simulate, simulate_case), None
 
 
 def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool = True, detector: str = "continuous",
@@ -192,6 +197,8 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     sphere trees are also built from nothing (`orthosim.spheretree.bench`, target 10 s).
     """
     import tempfile
+
+    from orthosim.background import in_child_process
 
     from .animation import FrameSink, prefetch
     from .renderer import Renderer
@@ -238,9 +245,10 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
             render_times.append(time.perf_counter() - t0)
 
     def end_to_end(state_iter, warm: int = warmup) -> dict:
-        """Frame-to-frame wall time of the pipeline `render_run` uses: states produced one ahead
-        on a thread (`prefetch`), scene update, render, read back, encode on the sink's threads."""
-        times, markers, moving = [], [], []
+        """Frame-to-frame wall time of the pipeline `render_run` uses: states taken ahead on a
+        thread (`prefetch`; from a child process when `state_iter` reads one), scene update,
+        render, read back, encode on the sink's threads."""
+        times, markers, drawn, moving = [], [], [], []
         tmp_ctx = tempfile.TemporaryDirectory(prefix="orthosim-bench-") if work_dir is None else None
         out_dir = Path(work_dir) if work_dir is not None else Path(tmp_ctx.name)
         sink = FrameSink(out_dir, png=png, mp4=True)
@@ -252,6 +260,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
             if i >= warm:
                 times.append(now - t_prev)
                 markers.append(st.n_contacts)
+                drawn.append(len(scene.markers.positions) if st.n_contacts else 0)
                 moving.append(len(st.moving))
             t_prev = now
             if i == warm - 1:
@@ -264,6 +273,8 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
             tmp_ctx.cleanup()
         return {"fps": _median_fps(times), "fps_overall_including_encoder_drain": overall, "mp4_bytes": mp4_bytes,
                 "markers_per_frame": {"median": float(np.median(markers)), "max": int(max(markers))},
+                # a sphere the state lists several times is drawn once (DentitionScene.unique_markers)
+                "distinct_markers_drawn_per_frame": {"median": float(np.median(drawn)), "max": int(max(drawn))},
                 # share of the measured frames in which some tooth moved: a case that has come to
                 # rest draws (cheaply) the same teeth again, so read the fps with this beside it
                 "frames_with_moving_teeth": float(np.mean([m > 0 for m in moving]))}
@@ -277,13 +288,14 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     fps_sim = None
     e2e_sim = None
     e2e_interp = None
+    e2e_thread = None
     collision = None
     if case_obj is not None and simulate:
         sim, why = _simulation(case_obj, dentition, detector)
         if sim is None:
             pending["simulation"] = why
         else:
-            movement_model, run = sim
+            movement_model, run, simulate_case = sim
             gen = run(movement_model, detector, steps=n_states)
             sim_times = []
             for i in range(n_states):
@@ -293,10 +305,21 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
                     sim_times.append(time.perf_counter() - t0)
             gen.close()
             fps_sim = _median_fps(sim_times)
-            e2e_sim = end_to_end(FrameState.from_step(rec, extracted)
-                                 for rec in run(movement_model, detector, steps=n_states - 1))
-            e2e_sim["includes"] = [f"simulation step (orthosim.movement, {detector} detector)", "scene update", "draw",
-                                   "colour read-back", *encode]
+            # the pipeline of `orthosim run`: the simulation in a child process (orthosim.background),
+            # running ahead of the drawing through a bounded queue, so that it does not take turns
+            # with the drawing and encoding for this process's GIL
+            sim_steps = f"simulation step (orthosim.movement, {detector} detector)"
+            with in_child_process(simulate_case, case_obj, detector, n_states - 1, dentition=dentition,
+                                  ignore_warnings=True) as records:
+                e2e_sim = end_to_end(FrameState.from_step(rec, extracted) for rec in records)
+            e2e_sim["includes"] = [f"{sim_steps} in a child process (orthosim.background), records sent "
+                                   "through a bounded queue", "scene update", "draw", "colour read-back", *encode]
+            # the same with the simulation on a thread of this process (`prefetch` alone, the
+            # pipeline before the child process): what the process buys, measured in this run
+            e2e_thread = end_to_end(FrameState.from_step(rec, extracted)
+                                    for rec in run(movement_model, detector, steps=n_states - 1))
+            e2e_thread["includes"] = [f"{sim_steps} on a thread of the drawing process (animation.prefetch)",
+                                      *e2e_sim["includes"][1:]]
             if frames_per_step > 1:
                 # what `orthosim run` does by default: frames interpolated between steps
                 import itertools
@@ -306,11 +329,13 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
                 # warm up over the same simulation steps as the other figures (a case's first steps,
                 # where collisions are resolved, are much slower than the rest)
                 warm = 1 + (warmup - 1) * frames_per_step
-                steps = frames_from_steps(run(movement_model, detector, steps=n_states), extracted, frames_per_step)
-                e2e_interp = end_to_end(itertools.islice(steps, warm + frames), warm=warm)
+                with in_child_process(simulate_case, case_obj, detector, n_states, dentition=dentition,
+                                      ignore_warnings=True) as records:
+                    steps = frames_from_steps(records, extracted, frames_per_step)
+                    e2e_interp = end_to_end(itertools.islice(steps, warm + frames), warm=warm)
                 e2e_interp["frames_per_step"] = frames_per_step
                 e2e_interp["includes"] = [f"one simulation step per {frames_per_step} frames, poses interpolated "
-                                          "between steps (render.timeline, as `orthosim run`)", *e2e_sim["includes"][1:]]
+                                          "between steps (render.timeline, as `orthosim run`)", *e2e_sim["includes"]]
             try:
                 from orthosim.collision.bench import collision_timings
 
@@ -373,6 +398,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         "end_to_end": e2e,
         "end_to_end_synthetic": e2e_synthetic,
         "end_to_end_interpolated": e2e_interp,
+        "end_to_end_simulation_on_thread": e2e_thread,
         "collision_us_per_step": None if collision is None else collision.get("collision_us_per_step"),
         "collision_fps": None if collision is None else {
             k: (1e6 / v if v else None) for k, v in collision.get("collision_us_per_step", {}).items()},

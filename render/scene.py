@@ -111,12 +111,13 @@ class DentitionScene:
 
     def __init__(self, dentition: Dentition, size: tuple[int, int] = (640, 480), *, hide_roots: bool = False,
                  color_contact_faces: bool = False, show_markers: bool = True, marker_style: str = "sprite",
-                 marker_subdivisions: int = 1, frame_points: np.ndarray | None = None):
+                 marker_subdivisions: int = 1, frame_points: np.ndarray | None = None, unique_markers: bool = True):
         """`marker_style`: "sprite" draws each contact sphere as a ray-cast point sprite (cheap at
         thousands of markers); "mesh" as an instanced icosphere (80 triangles at the default
         `marker_subdivisions`). `show_markers=False` with `color_contact_faces=True` shows contacts
         as coloured tooth surface only. `frame_points` ((n, 3) arch frame, mm) replace the rest-pose
-        vertices as what the camera presets are framed on."""
+        vertices as what the camera presets are framed on. `unique_markers`: a contact sphere
+        listed several times is drawn once (see `_update_markers`); False draws every listing."""
         pyrender = load_pyrender()
         self.uid = next(_scene_ids)  # names this scene in the renderer's caches
         self._frame_points = None if frame_points is None else np.asarray(frame_points, float).reshape(-1, 3)
@@ -125,6 +126,7 @@ class DentitionScene:
         self.hide_roots = hide_roots
         self.color_contact_faces = color_contact_faces
         self.show_markers = show_markers
+        self.unique_markers = unique_markers
         self.scene = pyrender.Scene(bg_color=[*BACKGROUND, 0.0], ambient_light=AMBIENT)
         # primitive -> version; the renderer re-uploads a primitive whose version it has not seen
         self.buffer_versions: dict[object, int] = {}
@@ -252,9 +254,25 @@ class DentitionScene:
         self.marker_mesh.is_visible = n > 0
         if n == 0:
             return
+        # (centre, radius) as drawn: float32
+        spheres = np.empty((n, 4), np.float32)
+        spheres[:, :3] = centers
+        spheres[:, 3] = radii
+        if self.unique_markers and n > 1:
+            # A simulation step lists a leaf sphere once per leaf of the other tooth it overlaps:
+            # three quarters of its markers repeat one already listed, and large overlapping
+            # sprites are what llvmpipe spends a frame's time on. A repeat is drawn after its
+            # first listing at exactly the same depth, which the depth test (GL_LESS, opaque, no
+            # blending) rejects at every pixel, so dropping the repeats, first listings kept in
+            # order, leaves every pixel as it was.
+            _, first = np.unique(spheres.view(np.dtype((np.void, 16))).ravel(), return_index=True)
+            if len(first) < n:
+                spheres = spheres[np.sort(first)]
+                n = len(spheres)
+        centers, radii = spheres[:, :3], spheres[:, 3]
         if self.marker_style == "sprite":
             # set the arrays directly: the setters would copy and re-derive buffer flags
-            self.markers._positions = np.ascontiguousarray(centers, dtype=np.float32)
+            self.markers._positions = np.ascontiguousarray(centers)
             tex = np.zeros((n, 2), np.float32)
             tex[:, 0] = radii
             self.markers._texcoord_0 = tex

@@ -236,6 +236,29 @@ def test_static_image_cache_changes_speed_not_pixels(dentition):
             assert np.array_equal(cached.render(a_scene, "frontal"), plain.render(b_scene, "frontal"))
 
 
+def test_a_contact_sphere_listed_several_times_is_drawn_once_with_the_same_pixels(renderer, dentition):
+    """The simulation lists a leaf sphere once per overlapping leaf of the other tooth; the scene
+    draws each sphere once, and the frame must equal the one drawing every listing."""
+    from render.bench import SyntheticMotion
+
+    rng = np.random.default_rng(3)
+    for i, view in enumerate(("frontal", "right_buccal", "maxillary")):
+        state = SyntheticMotion(dentition, n_markers=150, seed=i)(5 * i)
+        # each sphere listed one to four times, repeats interleaved with other spheres, big and overlapping
+        idx = rng.permutation(np.repeat(np.arange(state.n_contacts), rng.integers(1, 5, state.n_contacts)))
+        # and some spheres about the same centre as another but bigger: distinct, so drawn
+        grown = np.arange(0, state.n_contacts, 10)
+        centers = np.concatenate([state.contact_centers[idx], state.contact_centers[grown]])
+        radii = np.concatenate([4.0 * state.contact_radii[idx], 6.0 * state.contact_radii[grown]])
+        listed = FrameState(poses=state.poses, moving=state.moving, contact_centers=centers, contact_radii=radii)
+        once = DentitionScene(dentition, SIZE)
+        every = DentitionScene(dentition, SIZE, unique_markers=False)
+        once.update(listed)
+        every.update(listed)
+        assert len(once.markers.positions) == state.n_contacts + len(grown) < len(every.markers.positions) == len(radii)
+        assert np.array_equal(renderer.render(once, view), renderer.render(every, view)), view
+
+
 def test_contact_faces_are_drawn_in_the_contact_colour(renderer, dentition):
     """The Figure 7 option: tooth surface inside a contact sphere coloured, no marker drawn."""
     c = labial_point(dentition, 11, 3.0)

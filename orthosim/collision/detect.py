@@ -47,12 +47,14 @@ def default_pairs(model: CollisionModel, poses: np.ndarray | None = None, absent
 
 def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], poses_end: Mapping[int, np.ndarray] | None = None,
                 pairs: Sequence[tuple[int, int]] | None = None, detector: str = "discrete",
-                request: CollisionRequest = CollisionRequest()) -> StepResult:
+                request: CollisionRequest = CollisionRequest(), distances: exact.DistanceMemo | None = None) -> StepResult:
     """Test every candidate pair of one step with one detector.
 
     poses_start, poses_end: FDI -> (4, 4) local -> arch frame (mm); teeth not given keep their rest pose.
     pairs: (FDI a, FDI b) to test; the broad phase (`default_pairs`) when None.
     detector: "circles", "discrete", "continuous" or "exact".
+    distances: the caller's `exact.DistanceMemo` of this model, used by the refinement of the
+        continuous detector's time of contact (same answers, fewer FCL queries).
     """
     if detector not in DETECTORS:
         raise CollisionError(None, "detector", f"unknown detector {detector!r}", f"use one of {', '.join(DETECTORS)}")
@@ -85,7 +87,8 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
     if request.refine_time_of_contact:
         for i in np.flatnonzero(~np.isnan(toc)):
             a, b = pair_idx[i]
-            r = refine_time_of_contact(model, a, b, P0[a], P1[a], P0[b], P1[b], toc[i], request.contact_tolerance_mm)
+            r = refine_time_of_contact(model, a, b, P0[a], P1[a], P0[b], P1[b], toc[i], request.contact_tolerance_mm,
+                                       distances=distances)
             toc[i] = np.nan if r is None else r
     # the contact regions drawn are the leaf pairs overlapping when their pair first touches
     at = toc[pair]

@@ -81,8 +81,28 @@ def interpolate_pose(T0: np.ndarray, T1: np.ndarray, t: float | np.ndarray) -> n
     """Pose(s) at time t in [0, 1] of the step from T0 to T1 (both (4, 4)); returns (4, 4) or (n, 4, 4)."""
     T0 = np.asarray(T0, float)
     T1 = np.asarray(T1, float)
+    return _pose_at(T0, T1, rotation_vector(T0, T1), t)
+
+
+class PosePath:
+    """One tooth's motion over a step, T0 -> T1 (4, 4), asked for its pose at many times.
+
+    `at(t)` is `interpolate_pose(T0, T1, t)`, the same arithmetic, with the rotation vector found
+    once instead of at every call (conservative advancement asks for a pose per stride).
+    """
+
+    def __init__(self, T0: np.ndarray, T1: np.ndarray):
+        self.T0 = np.asarray(T0, float)
+        self.T1 = np.asarray(T1, float)
+        self.w = rotation_vector(self.T0, self.T1)
+
+    def at(self, t: float | np.ndarray) -> np.ndarray:
+        return _pose_at(self.T0, self.T1, self.w, t)
+
+
+def _pose_at(T0: np.ndarray, T1: np.ndarray, w: np.ndarray, t: float | np.ndarray) -> np.ndarray:
+    """`interpolate_pose` given the step's rotation vector w (3,) (radians)."""
     ts = np.atleast_1d(np.asarray(t, float))
-    w = rotation_vector(T0, T1)
     R = rotation_matrix(ts[:, None] * w[None, :]) @ T0[:3, :3]
     out = np.tile(np.eye(4), (len(ts), 1, 1))
     out[:, :3, :3] = R

@@ -135,6 +135,7 @@ class MovementModel:
     pairs: tuple[tuple[int, int], ...] = ()  # broad phase: arch neighbours, then facing pairs
     facing: frozenset[tuple[int, int]] = field(default_factory=frozenset)
     total_mass_g: float = 0.0
+    arch_orders: dict[F.Arch, list[int]] = field(default_factory=dict)  # present teeth, right to left
 
     @classmethod
     def build(cls, case: Case, dentition: Dentition | None = None, collision: CollisionModel | None = None,
@@ -149,7 +150,9 @@ class MovementModel:
         neighbours = set(dentition.adjacent_pairs(set(extracted)))
         facing = frozenset(p for p in pairs if tuple(p) not in neighbours)
         mech = {n: build_mechanics(dentition.teeth[n], settings.resistance_rule, settings.resistance_fraction) for n in present}
-        return cls(case, dentition, collision, mech, settings, extracted, present, tuple(map(tuple, pairs)), facing)
+        orders = {arch: [t for t in F.arch_order(arch, set(dentition.teeth)) if t not in extracted] for arch in F.Arch}
+        return cls(case, dentition, collision, mech, settings, extracted, present, tuple(map(tuple, pairs)), facing,
+                   arch_orders=orders)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -168,16 +171,29 @@ def _horizontal(v: np.ndarray) -> np.ndarray:
     return h / n if n > 0 else h
 
 
-def arch_direction(model: MovementModel, poses: Mapping[int, np.ndarray], fdi: int, direction: str) -> np.ndarray:
+def _present_in_arch(model: MovementModel, fdi: int) -> list[int]:
+    """Present teeth of fdi's arch, right distal end to left distal end."""
+    arch = F.arch_of(fdi)
+    order = model.arch_orders.get(arch)
+    if order is None:
+        order = [t for t in F.arch_order(arch, set(model.dentition.teeth)) if t not in model.extracted]
+    return order
+
+
+def arch_direction(model: MovementModel, poses: Mapping[int, np.ndarray], fdi: int, direction: str,
+                   centers: Mapping[int, np.ndarray] | None = None) -> np.ndarray:
     """(3,) unit arch-frame vector 'mesial' or 'distal' for a tooth at `poses`: toward the crown centre
     of the next present tooth that way along the arch (the paper's director vector), or along the
-    tooth's own mesiodistal axis at the end of the arch."""
-    order = [t for t in F.arch_order(F.arch_of(fdi), set(model.dentition.teeth)) if t not in model.extracted]
+    tooth's own mesiodistal axis at the end of the arch. centers: the crown centres at `poses`
+    (`_crown_centers`) when the caller has them."""
+    order = _present_in_arch(model, fdi)
     i = order.index(fdi)
     j = i + _arch_step(fdi, direction)
     tooth = model.dentition.teeth[fdi]
     R = poses[fdi][:3, :3]
     if 0 <= j < len(order):
+        if centers is not None:
+            return _horizontal(centers[order[j]] - centers[fdi])
         other = model.dentition.teeth[order[j]]
         c_other = other.to_world(other.crown_center, poses[order[j]])
         return _horizontal(c_other - tooth.to_world(tooth.crown_center, poses[fdi]))
@@ -185,8 +201,10 @@ def arch_direction(model: MovementModel, poses: Mapping[int, np.ndarray], fdi: i
     return _horizontal(sign * (R @ tooth.mesial))
 
 
-def load_vectors(model: MovementModel, poses: Mapping[int, np.ndarray], load: Load, fdi: int):
-    """(force (3,) cN, point (3,) mm, couple (3,) cN*mm) of one load on one tooth, arch frame, at `poses`."""
+def load_vectors(model: MovementModel, poses: Mapping[int, np.ndarray], load: Load, fdi: int,
+                 centers: Mapping[int, np.ndarray] | None = None):
+    """(force (3,) cN, point (3,) mm, couple (3,) cN*mm) of one load on one tooth, arch frame, at `poses`
+    (centers: the crown centres at `poses`, when the caller has them)."""
     tooth = model.dentition.teeth[fdi]
     mech = model.mechanics[fdi]
     R, p = poses[fdi][:3, :3], poses[fdi][:3, 3]
@@ -197,9 +215,9 @@ def load_vectors(model: MovementModel, poses: Mapping[int, np.ndarray], load: Lo
         d = "apical"
     if isinstance(d, str):
         if d in ("mesial", "distal"):
-            u = arch_direction(model, poses, fdi, d)
+            u = arch_direction(model, poses, fdi, d, centers)
         elif d in ("labial", "lingual"):
-            t = arch_direction(model, poses, fdi, "mesial")
+            t = arch_direction(model, poses, fdi, "mesial", centers)
             u = _horizontal(np.cross(t, [0.0, 1.0, 0.0]))
             if u @ (R @ tooth.labial) < 0:
                 u = -u
@@ -233,7 +251,7 @@ def _normal(model: MovementModel, pair: tuple[int, int], centers: Mapping[int, n
     return _horizontal(centers[b] - centers[a])
 
 
-def _onward(model: MovementModel, poses, touching) -> dict[tuple[int, int], np.ndarray]:
+def _onward(model: MovementModel, poses, touching, centers=None) -> dict[tuple[int, int], np.ndarray]:
     """(pusher, pushed) -> direction of the force the pushed tooth receives: along the arch, toward
     its own next tooth away from the pusher (the paper's director vector); occlusal pairs: none
     (the contact normal, vertical, is used)."""
@@ -245,7 +263,7 @@ def _onward(model: MovementModel, poses, touching) -> dict[tuple[int, int], np.n
         ia, ib = order.index(a), order.index(b)
         for i, j, step in ((a, b, np.sign(ib - ia)), (b, a, np.sign(ia - ib))):
             way = "mesial" if step == _arch_step(j, "mesial") else "distal"
-            out[(i, j)] = arch_direction(model, poses, j, way)
+            out[(i, j)] = arch_direction(model, poses, j, way, centers)
     return out
 
 
@@ -323,11 +341,11 @@ def _vertical_mover(m: Motion | None, point: np.ndarray, dt: float) -> bool:
     return abs(d[1]) > 0.5 * np.hypot(d[0], d[2])
 
 
-def _touching(model: MovementModel, detector: str, P: dict[int, np.ndarray], memo: dict | None = None):
+def _touching(model: MovementModel, detector: str, P: dict[int, np.ndarray], distances: exact.DistanceMemo | None = None):
     """Pairs in contact at poses P with the detector's notion of contact, and the leaves to draw.
 
-    memo: optional {(a, b): (pose a, pose b, exact distance)} kept across steps: a pair neither of
-    whose teeth has moved keeps its exact distance without a new FCL query.
+    distances: the run's memo of exact distances: a pair neither of whose teeth has moved keeps its
+    exact distance without a new FCL query.
     """
     s = model.settings
     pairs = list(model.pairs)
@@ -336,11 +354,11 @@ def _touching(model: MovementModel, detector: str, P: dict[int, np.ndarray], mem
         res = detect_step(model.collision, P, None, pairs, "circles")
         return res.touching_pairs(), empty
     if detector == "exact":
-        return [p for p in pairs if _exact_distance(model, P, p) <= s.touch_tolerance_mm], empty
+        return [p for p in pairs if _exact_distance(model, P, p, distances) <= s.touch_tolerance_mm], empty
     res = detect_step(model.collision, P, None, pairs, "discrete", CollisionRequest(all_leaf_pairs=True))
     touching = res.touching_pairs()
     if detector == "continuous":
-        touching = [p for p in touching if _memo_exact_distance(model, P, p, memo) <= s.touch_tolerance_mm]
+        touching = [p for p in touching if _exact_distance(model, P, p, distances) <= s.touch_tolerance_mm]
     keep = np.isin(res.pair_of_leaf, [i for i, p in enumerate(map(tuple, res.pairs.tolist())) if p in set(touching)])
     centers = np.concatenate([res.centers_a[keep], res.centers_b[keep]])
     radii = np.concatenate([res.radii_a[keep], res.radii_b[keep]])
@@ -355,21 +373,12 @@ def _fcl_pair(model: MovementModel, P, pair):
     return oa, ob
 
 
-def _exact_distance(model: MovementModel, P, pair) -> float:
-    return exact.distance(*_fcl_pair(model, P, pair))
-
-
-def _memo_exact_distance(model: MovementModel, P, pair, memo: dict | None) -> float:
-    """`_exact_distance`, reused from `memo` while neither tooth of the pair has moved."""
+def _exact_distance(model: MovementModel, P, pair, distances: exact.DistanceMemo | None = None) -> float:
+    """mm between the exact meshes of the pair at poses P; through the run's memo when given."""
+    if distances is None:
+        return exact.distance(*_fcl_pair(model, P, pair))
     a, b = pair
-    if memo is not None and pair in memo:
-        Ta, Tb, d = memo[pair]
-        if np.array_equal(Ta, P[a]) and np.array_equal(Tb, P[b]):
-            return d
-    d = _exact_distance(model, P, pair)
-    if memo is not None:
-        memo[pair] = (P[a].copy(), P[b].copy(), d)
-    return d
+    return distances(model.collision.index[a], P[a], model.collision.index[b], P[b])
 
 
 def penetrations(model: MovementModel, P: Mapping[int, np.ndarray], known: dict | None = None) -> dict[tuple[int, int], float]:
@@ -434,8 +443,9 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
     dt = float(model.case.step_days)
     n_steps = model.case.steps if steps is None else int(steps)
     P = {n: np.asarray(T, float).copy() for n, T in model.dentition.rest_poses().items()}
-    distance_memo: dict = {}
-    touching, leaves = _touching(model, detector, P, distance_memo)
+    # exact distances asked for in the run, each asked of FCL once (a step asks for many twice)
+    distances = exact.DistanceMemo(model.collision.fcl_object)
+    touching, leaves = _touching(model, detector, P, distances)
     dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
     depth_memo: dict = {}
     initial_depths = penetrations(model, P, depth_memo)
@@ -450,12 +460,12 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                 load.movement == "auto" and load.moment_cNmm == 0.0)
             for n in load.teeth:
                 if n in model.mechanics:
-                    loads_on.setdefault(n, []).append((*load_vectors(model, P, load, n), bodily))
+                    loads_on.setdefault(n, []).append((*load_vectors(model, P, load, n, centers), bodily))
         applied = {n: sum((f for f, *_ in v), np.zeros(3)) for n, v in loads_on.items()}
         contacts = [(a, b, _normal(model, (a, b), centers)) for a, b in touching]
         balance = propagate(applied, contacts, s.force_share,
                             lambda n, f: n in model.mechanics and s.rate.moves(f, model.mechanics[n].root_area_mm2),
-                            _onward(model, P, touching))
+                            _onward(model, P, touching, centers))
         # 2. motions and intended end poses
         motions = _motions(model, P, balance, loads_on, dt, centers)
         P1 = dict(P)
@@ -473,7 +483,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
             if detector != "continuous":
                 return _approaching(model, pair, current, dt, centers)
             end = {n: (P1[n] if n in current else P[n]) for n in pair}
-            d0, d1 = _exact_distance(model, P, pair), _exact_distance(model, end, pair)
+            d0, d1 = _exact_distance(model, P, pair, distances), _exact_distance(model, end, pair, distances)
             return d1 <= 0.0 or d1 < d0 - 1e-6
 
         def tested(current: dict[int, Motion], skip: set) -> list[tuple[int, int]]:
@@ -501,7 +511,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                 tested_pairs.update(pairs)
                 if not pairs:
                     break
-                res = detect_step(model.collision, P, P1, pairs, "continuous", request)
+                res = detect_step(model.collision, P, P1, pairs, "continuous", request, distances=distances)
                 hits = [(tuple(map(int, pr)), float(t)) for pr, t in zip(res.pairs, res.time_of_first_contact) if not np.isnan(t)]
                 if not hits:
                     break
@@ -535,7 +545,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
         P = P1
         # 4. contacts, interpenetration, distances
         before = touching_set
-        touching, leaves = _touching(model, detector, P, distance_memo)
+        touching, leaves = _touching(model, detector, P, distances)
         # a moving tooth that made a new contact without a reported hit (it stopped within the
         # touching tolerance) has collided too; teeth sliding over the other arch's have not
         seen = {e.pair for e in events}
@@ -546,6 +556,18 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
         yield StepRecord(k, k * dt, {n: T.copy() for n, T in P.items()}, moved, tuple(touching), leaves[0], leaves[1],
                          tuple(events), balance, max(0.0, _deepening(depths := penetrations(model, P, depth_memo), initial_depths)), dist,
                          max(depths.values(), default=0.0))
+
+
+def simulate_case(case: Case, detector: str | None = None, steps: int | None = None,
+                  dentition: Dentition | None = None) -> Iterator[StepRecord]:
+    """`simulate(MovementModel.build(case, dentition), detector, steps)`: a whole run from the case
+    (and its dentition, when the caller has built it already: building one takes seconds).
+
+    Everything it needs pickles, so it can run in a child process beside the renderer
+    (`orthosim.background.in_child_process(simulate_case, case, detector)`); the child builds the
+    same model from the same case and yields the same records.
+    """
+    return simulate(MovementModel.build(case, dentition=dentition), detector, steps)
 
 
 def _scaled(motions: dict[int, Motion], tcut: dict[int, float]) -> dict[int, Motion]:

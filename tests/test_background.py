@@ -1,0 +1,159 @@
+"""The simulation in a child process: the same records in the same order, its errors raised here,
+and no process left behind however the run ends."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from orthosim.background import ChildProcessIterator, in_child_process
+from orthosim.case import DEFAULT_CASE, load_case
+from orthosim.collision import exact
+from orthosim.errors import CaseError
+from orthosim.movement.simulation import MovementModel, simulate, simulate_case
+
+from background_helpers import endless, fails_after_two, numbers, unpicklable_item
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _gone(pid: int) -> bool:
+    """Neither running nor a zombie waiting to be reaped."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    return False
+
+
+def test_items_arrive_in_order_and_the_child_is_reaped_at_the_end():
+    with in_child_process(numbers, 200, depth=3) as items:
+        pid = items.pid
+        assert list(items) == list(range(200))
+    assert _gone(pid)
+
+
+@pytest.mark.parametrize("dentition_sent", [True, False], ids=["dentition sent, as orthosim run", "built in the child"])
+def test_a_child_simulation_yields_the_same_records_as_the_simulation_in_this_process(dentition_sent):
+    case = load_case(DEFAULT_CASE)  # the paper's case 1, whose teeth move and collide
+    child = ChildProcessIterator(preload=["orthosim.movement.simulation"])
+    model = MovementModel.build(case)
+    here = list(simulate(model, "continuous"))
+    with child.submit(simulate_case, case, "continuous", dentition=model.dentition if dentition_sent else None) as records:
+        there = list(records)
+    assert [r.step for r in there] == [r.step for r in here] == list(range(case.steps + 1))
+    assert any(r.moving for r in here) and any(r.collisions for r in here)
+    for a, b in zip(here, there):
+        assert a.poses.keys() == b.poses.keys()
+        assert all(np.array_equal(a.poses[n], b.poses[n]) for n in a.poses)
+        assert a.moving == b.moving and a.touching == b.touching
+        assert np.array_equal(a.contact_centers, b.contact_centers) and np.array_equal(a.contact_radii, b.contact_radii)
+        assert [(e.pair, e.time, e.impact.keys()) for e in a.collisions] == [(e.pair, e.time, e.impact.keys()) for e in b.collisions]
+        assert a.max_penetration_mm == b.max_penetration_mm and a.distances == b.distances
+
+
+def test_an_error_in_the_child_is_raised_here_as_the_same_error_after_the_items_before_it():
+    got = []
+    with pytest.raises(CaseError) as err:
+        with in_child_process(fails_after_two) as items:
+            pid = items.pid
+            for x in items:
+                got.append(x)
+    assert got == ["first", "second"]
+    assert str(err.value) == "case.toml: loads[0].teeth: tooth 99 does not exist (fix: use an FDI number)"
+    assert _gone(pid)
+
+
+def test_an_item_that_cannot_be_sent_is_an_error_not_a_silent_gap():
+    with pytest.raises(Exception, match="pickle|lambda"):
+        with in_child_process(unpicklable_item) as items:
+            list(items)
+
+
+def test_stopping_early_or_failing_in_the_consumer_stops_the_child():
+    with in_child_process(endless, depth=2) as items:
+        pid = items.pid
+        assert next(items)[0] == 0 and next(items)[0] == 1
+    assert _gone(pid)
+
+    with pytest.raises(ZeroDivisionError):
+        with in_child_process(endless) as items:
+            pid = items.pid
+            for x in items:
+                if x[0] == 3:
+                    1 / 0
+    assert _gone(pid)
+
+
+def test_a_child_given_no_work_is_stopped_at_once():
+    started = time.monotonic()
+    with ChildProcessIterator(preload=["numpy"]) as child:
+        pid = child.pid
+    assert _gone(pid) and time.monotonic() - started < 5
+
+
+def test_a_child_that_dies_is_reported_instead_of_waited_for():
+    with in_child_process(endless, depth=1) as items:
+        next(items)
+        os.kill(items.pid, signal.SIGKILL)
+        with pytest.raises(ChildProcessError, match="exited with code -9"):
+            for _ in range(10):  # a few items may already be in the queue
+                next(items)
+
+
+def test_remembered_exact_distances_are_fcls_own_answers():
+    from orthosim.collision import CollisionModel
+    from render.standin import standin_dentition
+
+    dent = standin_dentition()
+    model = CollisionModel.from_dentition(dent)
+    rest = dent.rest_poses()
+    a, b = dent.adjacent_pairs()[0]
+    ia, ib = model.index[a], model.index[b]
+    memo = exact.DistanceMemo(model.fcl_object)
+    for dx in (0.0, -0.3, 0.5, 0.0, -0.3):  # repeats among them
+        Ta = rest[a].copy()
+        Ta[0, 3] += dx
+        oa, ob = model.fcl_object(ia), model.fcl_object(ib)
+        exact.set_pose(oa, Ta)
+        exact.set_pose(ob, rest[b])
+        assert memo(ia, Ta, ib, rest[b]) == exact.distance(oa, ob)
+    assert memo.queries == 3  # each distinct query asked of FCL once
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="reads /proc to find the run's child processes")
+def test_ctrl_c_during_a_rendered_run_stops_it_in_one_line_and_leaves_no_process(tmp_path):
+    env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa"}
+    out = tmp_path / "o"
+    proc = subprocess.Popen([sys.executable, "-c", "from orthosim.cli import entry; entry()", "run",
+                             "cases/case1_first_premolar_extraction.toml", "--out", str(out)],
+                            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "frames").is_dir() or len(list((out / "frames").glob("*.png"))) < 3:
+            assert proc.poll() is None and time.monotonic() < deadline, "the run ended before it could be interrupted"
+            time.sleep(0.05)
+        children = [int(p) for t in Path(f"/proc/{proc.pid}/task").iterdir()
+                    for p in (t / "children").read_text().split()]
+        assert children  # the simulation (and the video encoder)
+        proc.send_signal(signal.SIGINT)
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0] in ("orthosim: interrupted", "orthosim: aborted")  # click reports Ctrl-C as aborted
+    deadline = time.monotonic() + 10
+    while not all(_gone(pid) for pid in children) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert all(_gone(pid) for pid in children)
+    assert not (out / "animation.mp4").exists() and not list(out.rglob(".*"))  # no partial or temporary files
