@@ -113,17 +113,23 @@ def _farthest_points(points: np.ndarray, k: int, rng) -> np.ndarray:
     return _farthest_point_sampling(np.ascontiguousarray(points, dtype=np.float64), k, int(rng.integers(len(points))))
 
 
+def _group_means(points: np.ndarray, label: np.ndarray, k: int, weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(k, d) weighted means of the (n, d) points in each group 0..k-1 (0 for an empty group), and
+    the (k,) total weights."""
+    w = np.ones(len(points)) if weights is None else weights
+    total = np.bincount(label, weights=w, minlength=k)
+    sums = np.stack([np.bincount(label, weights=w * points[:, i], minlength=k) for i in range(points.shape[1])], 1)
+    return sums / np.maximum(total, 1e-300)[:, None], total
+
+
 def _kmeans(points: np.ndarray, k: int, iterations: int, rng, weights: np.ndarray | None = None) -> np.ndarray:
     """(n, d) points into at most k clusters (Lloyd, k-d tree assignment): (n,) labels 0..used-1."""
     k = min(k, len(points))
     centres = points[_farthest_points(points, k, rng)]
-    w = np.ones(len(points)) if weights is None else weights
     for _ in range(iterations):
         label = cKDTree(centres).query(points)[1]
-        cnt = np.bincount(label, weights=w, minlength=k)
-        sums = np.stack([np.bincount(label, weights=w * points[:, i], minlength=k) for i in range(points.shape[1])], 1)
-        filled = cnt > 0
-        centres[filled] = sums[filled] / cnt[filled][:, None]
+        means, total = _group_means(points, label, k, weights)
+        centres[total > 0] = means[total > 0]
     label = cKDTree(centres).query(points)[1]
     return np.unique(label, return_inverse=True)[1]
 
@@ -152,10 +158,8 @@ def _split_with_capacity(points: np.ndarray, k: int, capacity: int, rng, iterati
                 left -= 1
                 if not left:
                     break
-        cnt = np.bincount(label, minlength=k)
-        sums = np.stack([np.bincount(label, weights=points[:, i], minlength=k) for i in range(points.shape[1])], 1)
-        filled = cnt > 0
-        centres[filled] = sums[filled] / cnt[filled][:, None]
+        means, total = _group_means(points, label, k)
+        centres[total > 0] = means[total > 0]
     return label
 
 
@@ -199,10 +203,7 @@ class _LeafFitter:
         r_shrunk = np.where(movable, radii_to_cover(rest_pts, c), r)
         crit_groups = node_vertex_groups(faces[crit], leaf_of_face[crit], n)  # (n, m), -1 rows: no critical face
         crit_pts = vertices[crit_groups]  # (n, m, 3)
-        crit_mean = np.zeros((n, 3))
-        for i in range(3):
-            crit_mean[:, i] = np.bincount(leaf_of_face[crit], weights=vertices[faces[crit]][:, :, i].mean(axis=1), minlength=n)
-        crit_mean /= np.maximum(crit_count, 1)[:, None]
+        crit_mean, _ = _group_means(vertices[faces[crit]].mean(axis=1), leaf_of_face[crit], n)
         k = min(k + 1, n)
         _, near = cKDTree(c).query(crit_mean, k=k)
         near = near.reshape(n, -1)
