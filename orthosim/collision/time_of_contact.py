@@ -43,7 +43,8 @@ def contact_interval_from_dots(aa: np.ndarray, ab: np.ndarray, bb: np.ndarray, r
     disc = ab * ab - bb * gap
     root = np.sqrt(np.maximum(disc, 0.0))
     closing = (ab < 0) & (disc >= 0) & (gap > 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # a near-zero denominator (spheres barely closing) gives inf, later read as "no contact in [0, 1)"
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         enter = gap / (-ab + root)  # Eq. 2, cancellation-free
         leave = np.where(bb > 0, (-ab + root) / bb, np.inf)
     enter = np.where(closing & (enter < 1.0), enter, np.nan)
