@@ -161,21 +161,21 @@ def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int = 
         progress(len(entries) - sum(users.values()))
     workers = min(workers or os.cpu_count() or 1, len(waiting))
     jobs = [(e.mesh, method, branching, depth) for e in waiting]
-    if workers > 1:
+
+    def built():
+        """(entry, tree) as each build finishes."""
+        if workers <= 1:
+            yield from ((e, _build(job)) for job, e in zip(jobs, waiting))
+            return
         # fork: the children start at once with the parent's imports and compiled kernels
-        context = multiprocessing.get_context("fork")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as pool:
             futures = {pool.submit(_build, job): e for job, e in zip(jobs, waiting)}
             for done in as_completed(futures):
-                e = futures[done]
-                stored[e.path] = done.result()
-                _store(stored[e.path], e)
-                if progress is not None:
-                    progress(users[e.path])
-    else:
-        for job, e in zip(jobs, waiting):
-            stored[e.path] = _build(job)
-            _store(stored[e.path], e)
-            if progress is not None:
-                progress(users[e.path])
+                yield futures[done], done.result()
+
+    for e, tree in built():
+        stored[e.path] = tree
+        _store(tree, e)
+        if progress is not None:
+            progress(users[e.path])
     return [mirror_tree(stored[e.path]) if e.flip else stored[e.path] for e in entries]
