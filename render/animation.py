@@ -215,25 +215,24 @@ def prefetch(items: Iterable, depth: int = 2) -> Iterator:
     stop = threading.Event()
     failure: list[BaseException] = []
 
+    def put(item) -> bool:
+        """Queue `item`, waiting while the queue is full; False if the consumer stopped first."""
+        while not stop.is_set():
+            try:
+                q.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
     def produce():
         try:
             for item in items:
-                while not stop.is_set():
-                    try:
-                        q.put(item, timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
+                if not put(item):
                     return
         except BaseException as exc:  # handed to the consumer
             failure.append(exc)
-        while not stop.is_set():
-            try:
-                q.put(_END, timeout=0.1)
-                return
-            except queue.Full:
-                continue
+        put(_END)
 
     worker = threading.Thread(target=produce, name="prefetch", daemon=True)
     worker.start()
