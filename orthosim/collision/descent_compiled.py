@@ -77,6 +77,18 @@ if AVAILABLE:
         return out
 
     @njit(cache=True, nogil=True)
+    def _append(res, m, q, na, nb, k, w, stride):
+        """Row m of the result: pair q, leaves na and nb (compact ids, stored flat), round k; the
+        buffer, grown when full."""
+        if m == res.shape[0]:
+            res = _grow(res, m)
+        res[m, 0] = q
+        res[m, 1] = (na // w) * stride + na % w
+        res[m, 2] = (nb // w) * stride + nb % w
+        res[m, 3] = k
+        return res
+
+    @njit(cache=True, nogil=True)
     def _walk(node, split_key, child_start, child_count, roots_a, roots_b, first_only, stack_size, w, stride):
         """Leaf pairs (rows pair, a, b, round) of every pair's walk; node ids are compact (body * w
         + j) inside, flat (body * stride + j) in the result.
@@ -127,12 +139,7 @@ if AVAILABLE:
                         best_a = na
                         best_b = nb
                         continue
-                    if m == res.shape[0]:
-                        res = _grow(res, m)
-                    res[m, 0] = q
-                    res[m, 1] = (na // w) * stride + na % w
-                    res[m, 2] = (nb // w) * stride + nb % w
-                    res[m, 3] = k
+                    res = _append(res, m, q, na, nb, k, w, stride)
                     m += 1
                     continue
                 if k + 1 >= best_round:
@@ -160,12 +167,7 @@ if AVAILABLE:
                         st_k[top] = k + 1
                         top += 1
             if first_only and best_a >= 0:
-                if m == res.shape[0]:
-                    res = _grow(res, m)
-                res[m, 0] = q
-                res[m, 1] = (best_a // w) * stride + best_a % w
-                res[m, 2] = (best_b // w) * stride + best_b % w
-                res[m, 3] = best_round
+                res = _append(res, m, q, best_a, best_b, best_round, w, stride)
                 m += 1
         return res[:m]
 
