@@ -217,23 +217,16 @@ def test_clean_mesh_loads_silently(tmp_path):
     assert loaded.is_watertight and loaded.volume > 0
 
 
-def test_tooth_in_metres_is_refused_with_the_scale_fix(tmp_path):
+@pytest.mark.parametrize("name,unit,fix", [("metres", 0.001, "scale=1000"), ("um", 1000.0, "micrometres.*scale=0.001")])
+def test_tooth_in_other_units_is_refused_with_the_scale_fix(tmp_path, name, unit, fix):
     mesh = _tooth_shape()
-    mesh.apply_scale(0.001)
-    path = tmp_path / "metres.stl"
+    mesh.apply_scale(unit)
+    path = tmp_path / f"{name}.stl"
     mesh.export(path)
-    with pytest.raises(MeshError, match="metres.stl.*scale=1000"):
+    with pytest.raises(MeshError, match=f"{name}.stl.*{fix}"):
         load_tooth_mesh(path)
-    assert load_tooth_mesh(path, scale=1000).volume == pytest.approx(_tooth_shape().volume, rel=1e-6)
-
-
-def test_tooth_in_micrometres_is_refused_with_the_scale_fix(tmp_path):
-    mesh = _tooth_shape()
-    mesh.apply_scale(1000.0)
-    path = tmp_path / "um.stl"
-    mesh.export(path)
-    with pytest.raises(MeshError, match="um.stl.*micrometres.*scale=0.001"):
-        load_tooth_mesh(path)
+    # the fix the message names loads the tooth at its size in mm
+    assert load_tooth_mesh(path, scale=1 / unit).volume == pytest.approx(_tooth_shape().volume, rel=1e-6)
 
 
 def _arch_folder(tmp_path: Path, tilt_deg: float = 10.0) -> dict[int, trimesh.Trimesh]:
