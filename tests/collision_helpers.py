@@ -13,9 +13,10 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from orthosim.shareddata import open_full_jaw_dir
 from orthosim.spheretree.tree import SphereTree
 
-REAL_MAXILLA = Path("/work/shared/data/open-full-jaw-patient26/maxilla")
+REAL_MAXILLA = open_full_jaw_dir("maxilla")
 
 
 def _sphere(tri: np.ndarray) -> tuple[np.ndarray, float]:

@@ -146,10 +146,9 @@ def test_duration_gives_step_count(tmp_path):
     assert case.steps == math.ceil(9.5 / 1)
 
 
+@pytest.mark.real_data
 def test_real_teeth_case_names_the_open_full_jaw_folder():
     path = CASES / "open_full_jaw_patient26.toml"
-    if not (CASES.parent.parent / "shared" / "data" / "open-full-jaw-patient26").is_dir():
-        pytest.skip("../shared/data is not beside the repository")
     case = load_case(path)
     assert case.model.kind == "open-full-jaw"
     assert case.model.present_teeth() == {18, 17, 16, 15, 14, 13, 12, 11, 21, 22, 23, 24, 25, 26, 27}

@@ -53,6 +53,7 @@ def test_discrete_sphere_trees_never_miss_an_intersection_the_exact_mesh_test_fi
     assert res["false_negatives"] == 0
 
 
+@pytest.mark.real_data
 def test_discrete_sphere_trees_never_miss_an_intersection_of_real_teeth():
     meshes = real_tooth_meshes((6, 7, 8))
     report = discrete_study([ToothSet("real", tuple(meshes), ((0, 1), (1, 2)))], n_poses=60,

@@ -15,8 +15,9 @@ from orthosim.fdi import Arch
 from orthosim.meshload import MeshRepairWarning, ToothAxes, load_mesh_folder, load_tooth_mesh
 from orthosim.openfulljaw import load_open_full_jaw
 from orthosim.pose import is_rigid
+from orthosim.shareddata import open_full_jaw_dir
 
-MAXILLA = Path("/work/shared/data/open-full-jaw-patient26/maxilla")
+MAXILLA = open_full_jaw_dir("maxilla")
 UPPER_PRESENT = [18, 17, 16, 15, 14, 13, 12, 11, 21, 22, 23, 24, 25, 26, 27]  # Universal 1-15; 28 absent
 
 
@@ -36,12 +37,14 @@ def jaw():
     return dentition, raw, [str(w.message) for w in caught]
 
 
+@pytest.mark.real_data
 def test_real_teeth_all_load_without_repairs(jaw):
     dentition, _, messages = jaw
     assert dentition.fdis == UPPER_PRESENT
     assert messages == []  # the dataset's meshes are clean: nothing to repair, no axis flipped
 
 
+@pytest.mark.real_data
 def test_scan_to_arch_is_one_rigid_map(jaw):
     dentition, raw, _ = jaw
     T = dentition.info["scan_to_arch"]
@@ -56,6 +59,7 @@ def test_scan_to_arch_is_one_rigid_map(jaw):
         assert abs(d_scan - d_arch) < 1e-6, (a, b)
 
 
+@pytest.mark.real_data
 def test_world_mesh_reproduces_the_file_geometry(jaw):
     dentition, raw, _ = jaw
     T = dentition.info["scan_to_arch"]
@@ -66,6 +70,7 @@ def test_world_mesh_reproduces_the_file_geometry(jaw):
         assert world.volume == pytest.approx(raw[n].volume, rel=1e-9)
 
 
+@pytest.mark.real_data
 def test_teeth_run_from_patients_right_to_left(jaw):
     dentition, _, _ = jaw
     centres = dentition.crown_centers()
@@ -76,6 +81,7 @@ def test_teeth_run_from_patients_right_to_left(jaw):
     assert centres[11][2] > centres[16][2]  # incisors anterior (+z) of molars
 
 
+@pytest.mark.real_data
 def test_crown_centres_lie_in_the_occlusal_plane_orientation(jaw):
     dentition, _, _ = jaw
     C = np.array(list(dentition.crown_centers().values()))
@@ -86,6 +92,7 @@ def test_crown_centres_lie_in_the_occlusal_plane_orientation(jaw):
     assert np.all(C[:, 1] > 0) and np.all(C[:, 1] < 10)
 
 
+@pytest.mark.real_data
 def test_upper_crowns_point_down(jaw):
     dentition, _, _ = jaw
     angles = {}
@@ -99,6 +106,7 @@ def test_upper_crowns_point_down(jaw):
     assert angles[18] < 32.0
 
 
+@pytest.mark.real_data
 def test_local_frames_are_anatomical(jaw):
     dentition, _, _ = jaw
     centres = dentition.crown_centers()
@@ -117,6 +125,7 @@ def test_local_frames_are_anatomical(jaw):
         assert set(np.unique(tooth.face_part)) == {0, 1}
 
 
+@pytest.mark.real_data
 def test_every_real_mesh_is_closed_with_positive_volume(jaw):
     dentition, _, _ = jaw
     for n in UPPER_PRESENT:
@@ -125,6 +134,7 @@ def test_every_real_mesh_is_closed_with_positive_volume(jaw):
         assert mesh.volume > 0, n
 
 
+@pytest.mark.real_data
 def test_info_records_how_it_was_built(jaw):
     dentition, _, _ = jaw
     info = dentition.info

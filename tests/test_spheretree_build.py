@@ -14,9 +14,10 @@ import trimesh
 
 from orthosim.errors import SphereTreeError
 from orthosim.spheretree import build_sphere_tree
+from orthosim.shareddata import open_full_jaw_dir
 from orthosim.spheretree.measure import count_holding, surface_samples
 
-REAL_MOLAR = Path("/work/shared/data/open-full-jaw-patient26/maxilla/tooth_3.stl")
+REAL_MOLAR = open_full_jaw_dir("maxilla") / "tooth_3.stl"
 
 
 def parametric_tooth(fdi: int = 36, resolution: str = "medium") -> trimesh.Trimesh:
@@ -84,7 +85,7 @@ def test_other_branching_factors_keep_coverage():
     assert_conservative(tree, mesh, n_surface=100_000)
 
 
-@pytest.mark.skipif(not REAL_MOLAR.exists(), reason="Open-Full-Jaw data not present")
+@pytest.mark.real_data
 def test_real_molar_is_covered_by_its_leaves():
     mesh = trimesh.load(REAL_MOLAR)
     tree = build_sphere_tree(mesh, method="fit")

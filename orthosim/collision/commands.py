@@ -10,9 +10,9 @@ from pathlib import Path
 
 import click
 
+from ..shareddata import open_full_jaw_dir
 from .contract import DETECTORS, CollisionRequest
 
-DEFAULT_REAL = "/work/shared/data/open-full-jaw-patient26/maxilla"
 
 
 @click.group()
@@ -30,7 +30,7 @@ def collide() -> None:
 @click.option("--samples", type=click.IntRange(10), default=400, show_default=True,
               help="Exact collision tests per step for the continuous ground truth.")
 @click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--real-folder", type=click.Path(path_type=Path), default=Path(DEFAULT_REAL), show_default=True,
+@click.option("--real-folder", type=click.Path(path_type=Path), default=open_full_jaw_dir("maxilla"), show_default="../shared/data/open-full-jaw-patient26/maxilla beside the repository, or $ORTHOSIM_SHARED_DATA/...",
               help="Open-Full-Jaw maxilla folder; its teeth are studied when it exists.")
 @click.option("--trees", type=click.Choice(["fit", "octree"]), default="fit", show_default=True,
               help="Sphere-tree builder method (trees are cached on disk).")
@@ -39,6 +39,9 @@ def validate(out_file: Path, poses: int, motions: int, samples: int, seed: int, 
     from ..spheretree.cache import cached_sphere_tree
     from .validate import run_validation
 
+    if not real_folder.is_dir():
+        click.echo(f"orthosim: warning: no real teeth at {real_folder}; the study covers the parametric and "
+                   "thin-root sets only (pass --real-folder or set ORTHOSIM_SHARED_DATA)", err=True)
     report = run_validation(out_file, n_poses=poses, n_motions=motions, seed=seed, real_folder=real_folder,
                             samples=samples, tree_builder=lambda mesh: cached_sphere_tree(mesh, method=trees),
                             tree_label=f"orthosim.spheretree cached_sphere_tree(method={trees!r}, 8 x 4 levels)")

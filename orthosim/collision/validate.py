@@ -395,7 +395,7 @@ def default_tooth_sets(real_folder: str | Path | None = None, real_numbers=(3, 4
 
 
 def run_validation(out: str | Path, n_poses: int = 10000, n_motions: int = 2000, seed: int = 0,
-                   real_folder: str | Path | None = "/work/shared/data/open-full-jaw-patient26/maxilla",
+                   real_folder: str | Path | None = None,
                    tree_builder: Callable | None = None, samples: int = 400, tree_label: str | None = None) -> dict:
     """Both studies, written to `out` as JSON. n_poses / n_motions are split across the tooth sets.
 
@@ -411,6 +411,7 @@ def run_validation(out: str | Path, n_poses: int = 10000, n_motions: int = 2000,
         "discrete_far": discrete_study(sets, max(per_pose // 4, 1), tree_builder, seed + 1, offset_range=(0.5, 3.0)),
         "continuous": continuous_study(sets, per_motion, tree_builder, seed + 2, samples=samples,
                                        tunnelling_sets=("thin_root",)),
+        "real_teeth_folder": str(real_folder) if real_folder is not None and Path(real_folder).is_dir() else None,
         "tree_builder": tree_label or getattr(tree_builder, "__name__", None) or "orthosim.spheretree cached_sphere_tree (fit)",
         "tooth_sets": {ts.name: {"meshes": len(ts.meshes), "faces": [len(m.faces) for m in ts.meshes],
                                  "pairs": [list(p) for p in _pairs_of(ts)]} for ts in sets},
