@@ -176,6 +176,7 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
     from .metrics import occlusion_summary
     from .movement.report import RunReport
     from .movement.simulation import MovementModel, simulate, simulate_case
+    from .runfolder import write_run_record
 
     case = load_case(case_path)
     detector = detector or case.detector
@@ -203,6 +204,7 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
     extra["occlusion_final"] = occlusion_summary(dent, {n: report.last.poses[n] for n in dent.fdis})
     extra["wall_s"] = time.perf_counter() - started
     metrics = report.write(out_dir, extra)
+    write_run_record(out_dir, case_path, detector, {"wall_s": extra["wall_s"]})  # last: marks the run finished
     click.echo(f"{case.name} ({detector}): {metrics['steps']} steps, total distance "
                f"{metrics['total_distance_mm']['initial']:.2f} -> {metrics['total_distance_mm']['final']:.2f} mm, "
                f"{metrics['collisions']} collisions, max penetration {metrics['max_penetration_mm']:.3f} mm -> {out_dir}/metrics.json")

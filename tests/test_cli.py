@@ -36,6 +36,9 @@ def test_run_without_render_writes_metrics_of_the_initial_model(tmp_path):
     pairs = [d["pair"] for d in metrics["distances"]]
     assert [15, 13] in pairs and [23, 25] in pairs and [13, 14] not in pairs
     assert not list((tmp_path / "o").glob(".*"))  # no temporary files left behind
+    from orthosim.runfolder import read_finished_run
+
+    assert read_finished_run(tmp_path / "o")["detector"] == "continuous"  # run.json marks it finished
 
 
 @pytest.mark.parametrize("text, expected", [
