@@ -162,6 +162,33 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
                    f"loaded in {1000 * trees['load_s']:.0f} ms")
 
 
+@main.command()
+@click.argument("golden", type=click.Path(path_type=Path))
+@click.argument("candidate", type=click.Path(path_type=Path))
+@click.option("--diff", "diff_path", type=click.Path(path_type=Path), default=None,
+              help="Write the diff image here (default: CANDIDATE.diff.png, only when they differ).")
+@click.option("--max-level", default=3, show_default=True, type=int,
+              help="Tolerance mode: levels (0-255) a channel may be off before its pixel counts as different.")
+@click.option("--max-fraction", default=0.001, show_default=True, type=float,
+              help="Tolerance mode: fraction of pixels allowed to differ (0.001 = 0.1 %).")
+@click.option("--update", is_flag=True, help="Make the candidate the golden: rewrite GOLDEN.png and GOLDEN.json.")
+def imgdiff(golden: Path, candidate: Path, diff_path: Path | None, max_level: int, max_fraction: float,
+            update: bool) -> None:
+    """Compare a render with its golden PNG; exit 0 match, 1 differ, 2 unusable input.
+
+    Exact when the candidate was drawn by the GL renderer and Mesa version the golden's sidecar
+    (GOLDEN.json) names, else within tolerance (SSIM reported). See render/imgdiff.py.
+    """
+    from render.imgdiff import Tolerance, imgdiff as compare
+    from render.regression import this_machine_gl
+
+    outcome = compare(golden, candidate, diff_path=diff_path, tolerance=Tolerance(max_level, max_fraction),
+                      update=update, this_machine=this_machine_gl)
+    click.echo(outcome.line)
+    if outcome.exit_code:
+        sys.exit(outcome.exit_code)
+
+
 def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> None:
     """Simulate the case (orthosim.movement), draw its steps unless --no-render, write
     out_dir/metrics.json and out_dir/distances.csv.

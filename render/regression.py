@@ -1,0 +1,165 @@
+"""Renders for image regression tests: one simulation step of a case, in one view, at one size, as an array.
+
+    from render.regression import render_case_frame
+    frame = render_case_frame("cases/case1_first_premolar_extraction.toml", step=-1, view="right_buccal")
+    np.asarray(frame)   # (240, 320, 3) uint8; frame.sidecar says what drew it and what it shows
+
+A frame is named by its simulation step (negative counts from the end, -1 = the case's last
+step), not by an animation frame index, which would change with `--frames-per-step`. It is drawn
+as `orthosim run` draws a step's end (same scene, colours, light rig and contact markers), with
+no text overlay or anything else that is not the teeth, so a golden only changes when the teeth,
+their contacts or the drawing of them change. One renderer per image size and one simulation per
+case file content are kept for the life of the process: a test module rendering five views of a
+case simulates it once.
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from orthosim import __version__
+from orthosim.runfolder import file_sha256
+
+from .imgdiff import GoldenSidecar
+
+DEFAULT_SIZE = (320, 240)
+
+
+@dataclass(frozen=True, eq=False)
+class RenderedFrame:
+    """A rendered image, (h, w, 3) uint8 RGB, and what identifies it (`sidecar`); usable as an array."""
+
+    image: np.ndarray
+    sidecar: GoldenSidecar
+
+    def __array__(self, dtype=None, copy=None):
+        return self.image if dtype is None else self.image.astype(dtype)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self.image.shape
+
+
+def mesa_version(gl_version: str) -> str | None:
+    """'4.5 (Core Profile) Mesa 22.3.6' -> '22.3.6'; None when the GL is not Mesa's."""
+    match = re.search(r"Mesa (\S+)", gl_version or "")
+    return match.group(1) if match else None
+
+
+@functools.cache
+def _renderer(size: tuple[int, int]):
+    from .renderer import Renderer
+
+    return Renderer(size)
+
+
+def gl_identity() -> GoldenSidecar:
+    """This machine's GL renderer string and Mesa version (from an offscreen context), the rest unset."""
+    r = _renderer(DEFAULT_SIZE)
+    return GoldenSidecar(gl_renderer=r.gl_renderer, mesa_version=mesa_version(r.gl_version), orthosim_version=__version__)
+
+
+def this_machine_gl() -> GoldenSidecar | None:
+    """`gl_identity()`, or None when no offscreen context can start here (the comparison then uses tolerance)."""
+    from .gl import RenderSetupError
+
+    try:
+        return gl_identity()
+    except RenderSetupError:
+        return None
+
+
+def render_state(dentition, state, view: str = "frontal", size: tuple[int, int] = DEFAULT_SIZE, *,
+                 hide_roots: bool = False, contact_faces: bool = False) -> np.ndarray:
+    """(h, w, 3) uint8: `state` (a `render.frame_state.FrameState`) of `dentition` from preset `view`."""
+    from .scene import DentitionScene
+
+    scene = DentitionScene(dentition, size, hide_roots=hide_roots, color_contact_faces=contact_faces)
+    scene.update(state)
+    return _renderer((int(size[0]), int(size[1]))).render(scene, view)
+
+
+@dataclass(frozen=True, eq=False)
+class SimulatedCase:
+    """A case run once: its dentition, extracted teeth and every step record (step 0 first)."""
+
+    case_file: Path
+    case_sha256: str
+    dentition: object  # orthosim.dentition.Dentition
+    extracted: frozenset[int]
+    records: tuple  # orthosim.movement.simulation.StepRecord, one per step
+
+    def state(self, step: int = -1, contacts: bool = True):
+        """The `FrameState` drawn for `step` (negative counts from the end); contacts off drops the markers."""
+        from .frame_state import FrameState
+
+        record = self.records[self._index(step)]
+        state = FrameState.from_step(record, self.extracted)
+        if not contacts:
+            state = FrameState(poses=state.poses, extracted=state.extracted, moving=state.moving, step=state.step)
+        return state
+
+    def _index(self, step: int) -> int:
+        n = len(self.records)
+        if not -n <= step < n:
+            from orthosim.errors import CaseError
+
+            raise CaseError(self.case_file, "step", f"{step} is not a step of this case (it has steps 0 to {n - 1})",
+                            f"give a step from 0 to {n - 1}, or -1 for the last")
+        return step % n
+
+
+@functools.lru_cache(maxsize=4)
+def _simulated(case_file: Path, case_sha256: str, detector: str | None, steps: int | None) -> SimulatedCase:
+    from orthosim.case import load_case
+    from orthosim.movement.simulation import MovementModel, simulate
+
+    case = load_case(case_file)
+    model = MovementModel.build(case)
+    records = tuple(simulate(model, detector or case.detector, steps))
+    return SimulatedCase(case_file, case_sha256, model.dentition, frozenset(case.extractions), records)
+
+
+def simulate_case_once(case_file: str | Path, detector: str | None = None, steps: int | None = None) -> SimulatedCase:
+    """The run of `case_file` (its first `steps` steps; None: all), simulated once per process and
+    file content (cached by SHA-256)."""
+    from orthosim.errors import CaseError
+
+    path = Path(case_file).resolve()
+    if not path.is_file():
+        raise CaseError(case_file, None, "case file not found", "give the path of a case .toml file")
+    return _simulated(path, file_sha256(path), detector, steps)
+
+
+def render_case_frame(case_file: str | Path, step: int = -1, view: str = "frontal",
+                      size: tuple[int, int] = DEFAULT_SIZE, *, detector: str | None = None, contacts: bool = True,
+                      hide_roots: bool = False, contact_faces: bool = False) -> RenderedFrame:
+    """Simulation step `step` of the case (-1: its last) from camera preset `view`, at `size` (w, h) px.
+
+    Contact markers are drawn (`contacts=False` leaves them out); `detector` defaults to the case's.
+    The frame's sidecar names this machine's GL renderer and Mesa version, the size, view, case
+    file name and SHA-256 and the step, as `orthosim imgdiff` and the pytest fixture expect.
+    """
+    from .cameras import check_view
+
+    view = check_view(view)
+    # a step counted from the start needs only the steps up to it (never more than the case has);
+    # from the end, the whole run
+    steps = None
+    if step >= 0:
+        from orthosim.case import load_case
+
+        steps = min(step, load_case(case_file).steps)
+    run = simulate_case_once(case_file, detector, steps)
+    state = run.state(step, contacts)
+    image = render_state(run.dentition, state, view, size, hide_roots=hide_roots, contact_faces=contact_faces)
+    gl = gl_identity()
+    sidecar = GoldenSidecar(gl_renderer=gl.gl_renderer, mesa_version=gl.mesa_version, size=(int(size[0]), int(size[1])),
+                            view=view, orthosim_version=__version__, case_file=run.case_file.name,
+                            case_sha256=run.case_sha256, frame_index=state.step)
+    return RenderedFrame(image, sidecar)
