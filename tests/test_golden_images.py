@@ -1,0 +1,70 @@
+"""orthosim's own golden images (tests/golden/): what a change to the drawing, the model or the cases does to a render.
+
+Each test renders through the public API (`render.regression`) and checks the image with the
+`orthosim_image_regression` fixture, as a user's test would: exact on the machine and Mesa build
+the goldens were made with, within tolerance elsewhere. Frames are named by simulation step (a
+paper case's last step), never by animation frame, and carry no text overlay.
+
+When a change is meant to alter pixels (a new sphere-tree builder, other colours, a case edit),
+regenerate every golden and its sidecar with ONE command, then review `git diff tests/golden`:
+
+    PYOPENGL_PLATFORM=osmesa .venv/bin/python -m pytest tests/test_golden_images.py --orthosim-regen-all
+
+Goldens here: the normal occlusion in each of the five views; each paper case's last step with its
+contacts; the sphere tree of a first molar level by level (the paper's Figure 2). The distance map
+of the reports issue gets its golden here too once that report exists (one more test below,
+`distance_map_<case>` as its name).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from render.cameras import VIEW_NAMES
+from render.regression import render_case_frame
+
+ROOT = Path(__file__).resolve().parent.parent
+CASES = ROOT / "cases"
+GOLDEN_DIR = Path(__file__).resolve().parent / "golden"
+SIZE = (320, 240)
+# each paper case in the view that shows its treatment: the buccal segments close extraction spaces,
+# the incisors close a midline diastema
+PAPER_CASES = {
+    "case1_first_premolar_extraction": "right_buccal",
+    "case2_second_premolar_extraction": "right_buccal",
+    "case3_incisor_space_closure": "frontal",
+}
+
+
+@pytest.fixture
+def orthosim_golden_dir() -> Path:
+    """Our goldens share one folder (the issue's tests/golden/), not pytest-regressions' per-module one."""
+    return GOLDEN_DIR
+
+
+@pytest.mark.parametrize("view", VIEW_NAMES)
+def test_normal_occlusion_in_each_view_matches_its_golden(orthosim_image_regression, view):
+    frame = render_case_frame(CASES / "normal_occlusion.toml", step=0, view=view, size=SIZE)
+    orthosim_image_regression.check(frame, f"normal_occlusion_{view}")
+
+
+@pytest.mark.parametrize("case", PAPER_CASES)
+def test_paper_case_last_step_with_contacts_matches_its_golden(orthosim_image_regression, case):
+    frame = render_case_frame(CASES / f"{case}.toml", step=-1, view=PAPER_CASES[case], size=SIZE)
+    assert frame.sidecar.frame_index > 0 and frame.sidecar.case_file == f"{case}.toml"
+    orthosim_image_regression.check(frame, f"{case}_last_step_{PAPER_CASES[case]}")
+
+
+def test_sphere_tree_levels_of_a_first_molar_match_their_golden(orthosim_image_regression):
+    """Figure 2: tooth 16, then its spheres at every level below the root, side by side."""
+    from orthosim.case import load_case
+    from orthosim.spheretree import cached_sphere_tree
+    from render.spheretree_view import render_sphere_tree
+
+    tooth = load_case(CASES / "normal_occlusion.toml").build_dentition().teeth[16]
+    tree = cached_sphere_tree(tooth.mesh)
+    levels = list(range(1, tree.depth))
+    image = render_sphere_tree(tooth, tree, levels, size=(SIZE[0] // (1 + len(levels)), SIZE[1]))
+    orthosim_image_regression.check(image, "spheretree_levels_tooth16")
