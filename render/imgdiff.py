@@ -338,21 +338,26 @@ def imgdiff(golden_path: str | Path, candidate_path: str | Path, *, diff_path: s
     golden_path, candidate_path = Path(golden_path), Path(candidate_path)
     candidate = read_png(candidate_path, "candidate")
     candidate_sidecar = read_sidecar(candidate_path)
-    if candidate_sidecar is None and this_machine is not None:
-        candidate_sidecar = this_machine()
+
+    def candidate_gl() -> GoldenSidecar | None:
+        # asked only when it can matter: starting a GL context to ask takes seconds
+        return candidate_sidecar or (this_machine() if this_machine is not None else None)
+
     if update and not golden_path.exists():
-        write_golden(golden_path, candidate, candidate_sidecar or GoldenSidecar())
+        write_golden(golden_path, candidate, candidate_gl() or GoldenSidecar())
         return ImgdiffOutcome(0, f"created golden {golden_path} and {sidecar_path(golden_path)} from {candidate_path}",
                               None, None)
     try:
         golden = read_png(golden_path, "golden")
         golden_sidecar = read_sidecar(golden_path)
-        comparison = compare_images(golden, candidate, golden_sidecar, candidate_sidecar, tolerance,
+        known = golden_sidecar is not None and golden_sidecar.gl_renderer and golden_sidecar.mesa_version
+        comparison = compare_images(golden, candidate, golden_sidecar,
+                                    candidate_gl() if known or update else candidate_sidecar, tolerance,
                                     names=(str(golden_path), str(candidate_path)))
     except ImageInputError as err:
         if not update:
             raise
-        write_golden(golden_path, candidate, candidate_sidecar or GoldenSidecar())
+        write_golden(golden_path, candidate, candidate_gl() or GoldenSidecar())
         return ImgdiffOutcome(0, f"updated golden {golden_path} and {sidecar_path(golden_path)} from {candidate_path} "
                                  f"(the old one was unusable: {err.problem})", None, None)
     written = None
@@ -360,7 +365,7 @@ def imgdiff(golden_path: str | Path, candidate_path: str | Path, *, diff_path: s
         written = write_diff_image(diff_path or default_diff_path(candidate_path), golden, candidate, comparison)
     line = comparison.summary() + (f" -> {written}" if written else "")
     if update:
-        write_golden(golden_path, candidate, candidate_sidecar or GoldenSidecar())
+        write_golden(golden_path, candidate, candidate_gl() or GoldenSidecar())
         return ImgdiffOutcome(0, f"updated golden {golden_path} and {sidecar_path(golden_path)} from {candidate_path} "
                                  f"(it was: {line})", comparison, written)
     return ImgdiffOutcome(0 if comparison.matched else 1, line, comparison, written)

@@ -183,8 +183,7 @@ def test_a_truncated_golden_gives_exit_2_and_a_clear_message(tmp_path):
 @pytest.mark.parametrize("problem", ["missing", "not a png", "empty", "other size", "bad sidecar"])
 def test_unusable_input_exits_2_with_one_line_naming_the_file(tmp_path, problem):
     golden = copy_golden(NORMAL_FRONTAL, tmp_path / "golden.png")
-    candidate = tmp_path / "candidate.png"
-    shutil.copyfile(NORMAL_FRONTAL, candidate)
+    candidate = copy_golden(NORMAL_FRONTAL, tmp_path / "candidate.png")  # with a sidecar: no GL probe needed
     named = candidate
     if problem == "missing":
         candidate.unlink()
