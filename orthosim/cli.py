@@ -163,10 +163,11 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--no-png", is_flag=True, help="End to end without writing PNG frames (MP4 only).")
 @click.option("--no-simulate", is_flag=True, help="Skip the movement simulation (end to end on synthetic motion).")
 @click.option("--no-tree-build", is_flag=True, help="Skip timing the sphere-tree build from nothing.")
+@click.option("--no-startup", is_flag=True, help="Skip timing `orthosim run` from launch to its first step.")
 @click.option("--step-days", default=2.0, show_default=True, type=click.FloatRange(min=0.01),
               help="Simulation step for the bench, so the case's teeth keep moving through the measured frames.")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
-          no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool) -> None:
+          no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -177,11 +178,15 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
 
     record = run_bench(case, frames=frames, warmup=warmup, size=size, n_markers=markers,
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
-                       step_days=step_days, tree_build=not no_tree_build)
+                       step_days=step_days, tree_build=not no_tree_build, startup=not no_startup)
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
     click.echo(f"fps (median, target {record['target_fps']}): {shown} -> {out_file}")
+    if record.get("startup"):
+        st = record["startup"]
+        click.echo(f"start-up: first step {st['startup_s']:.2f} s after launching `orthosim run` (target {st['target_s']:.0f} s; "
+                   f"bare python {st['python_start_s']:.2f} s, load {st['load_avg_1min']:.1f})")
     trees = record.get("spheretree_build")
     if trees:
         click.echo(f"sphere trees of {trees['teeth']} teeth built in {trees['build_s']:.1f} s on {trees['workers']} cores "
