@@ -182,3 +182,15 @@ def test_a_drawn_run_has_the_asked_length_split_views_and_a_full_size_gif(short_
     assert run["render"]["frames"] == n and run["render"]["video_fps"] == 10
     # not a terminal: nothing but the summary line
     assert len(r.stdout.strip().splitlines()) == 1 and r.stderr == ""
+
+
+def test_collide_step_queries_a_case_at_a_simulation_step():
+    before = orthosim("collide", "step", "cases/case3_incisor_space_closure.toml", "--step", "0")
+    after = orthosim("collide", "step", "cases/case3_incisor_space_closure.toml", "--step", "9")
+    assert before.returncode == 0 and after.returncode == 0, before.stderr + after.stderr
+    before, after = json.loads(before.stdout), json.loads(after.stdout)
+    assert before["step"] == 0 and after["step"] == 9 and after["time_days"] == 126
+    # the 2 mm diastema is open at the start and closed by the end: the central incisors meet
+    assert [11, 21] not in before["touching"] and [11, 21] in after["touching"]
+    late = orthosim("collide", "step", "cases/case3_incisor_space_closure.toml", "--step", "10")
+    assert late.returncode == 2 and "past the case's last step (9)" in late.stderr
