@@ -9,7 +9,7 @@ No narrow phase: circles cannot tell crown from root, or upper from lower teeth.
 
 What a circles contact looks like (`overlap_spheres`): where two circles overlap, the lens between
 them; it is drawn as one sphere on the line between the centres, at the middle of the overlap
-(radius half its depth along that line), at the mean height of the two crowns' circle centres. It
+(radius half its depth along that line, at most LENS_MARKER_MAX_MM), at the mean height of the two crowns' circle centres. It
 marks where the detector says the teeth meet and how deep its (coarse) overlap is.
 """
 
@@ -18,6 +18,10 @@ from __future__ import annotations
 import numpy as np
 
 from .model import CollisionModel
+
+# Facing upper and lower teeth project onto each other, so their circles overlap by many mm; a
+# marker that large would hide the crowns it marks.
+LENS_MARKER_MAX_MM = 1.0
 
 
 def bounding_circles(model: CollisionModel, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -52,7 +56,7 @@ def overlap_spheres(model: CollisionModel, poses: np.ndarray, pair_idx: np.ndarr
     along = np.where(d_xz > 0, (0.5 * (ra + d_xz - rb)) / np.maximum(d_xz, 1e-12), 0.5)
     centers = a + along[:, None] * (b - a)
     centers[:, 1] = 0.5 * (a[:, 1] + b[:, 1])
-    return centers, 0.5 * depth
+    return centers, np.minimum(0.5 * depth, LENS_MARKER_MAX_MM)
 
 
 def circles_overlap(centers: np.ndarray, radii: np.ndarray, pair_idx: np.ndarray) -> np.ndarray:
