@@ -118,11 +118,33 @@ class Case:
 
             dent: Dentition = parametric_dentition(m.resolution, m.third_molars, m.diastema_mm)
             return dent
+        from .dentition_cache import cached_dentition
+
+        return cached_dentition(*self._mesh_model_key(), build=self._load_meshes)
+
+    def _mesh_model_key(self) -> tuple[dict, list[Path]]:
+        """(parameters, input files) that decide a mesh model: the dentition cache's key."""
+        m = self.model
+        if m.kind == "meshes":
+            return {"kind": m.kind, "files": m.files, "scale": m.scale}, [m.folder / f for f in m.files]
+        return {"kind": m.kind}, sorted(p for p in m.folder.iterdir() if p.is_file())
+
+    def _load_meshes(self):
         from . import meshload
 
+        m = self.model
         if m.kind == "meshes":
             return meshload.load_mesh_folder(m.folder, m.files, scale=m.scale)
         return meshload.load_open_full_jaw(m.folder)
+
+    def dentition_is_cached(self) -> bool:
+        """Whether `build_dentition` will load the teeth from the disk cache rather than build them."""
+        from .dentition_cache import is_cached, parametric_parameters
+
+        m = self.model
+        if m.kind == "parametric":
+            return is_cached(parametric_parameters(m.resolution, m.third_molars, m.diastema_mm))
+        return is_cached(*self._mesh_model_key())
 
 
 class _Reader:

@@ -16,6 +16,7 @@ import click
 
 from . import __version__
 from .errors import OrthosimError
+from .run import MIN_ANIMATION_S, RunOptions
 
 DEMO_VIEWS = ("right_buccal", "maxillary_occlusal")
 
@@ -28,6 +29,18 @@ def _size(ctx, param, value: str) -> tuple[int, int]:
     except ValueError:
         raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT in pixels (16 to 8192), e.g. 640x480") from None
     return w, h
+
+
+def _steps(ctx, param, value: str | None) -> tuple[int, ...] | None:
+    if value is None:
+        return None
+    try:
+        steps = tuple(int(v) for v in value.split(","))
+        if not steps or min(steps) < 0:
+            raise ValueError
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is not a comma-separated list of step numbers, e.g. 0,60,120") from None
+    return steps
 
 
 class _LazyGroup(click.Group):
@@ -77,12 +90,26 @@ def render_options(f):
     f = click.option("--no-render", is_flag=True, help="Run the simulation alone; write no images.")(f)
     f = click.option("--size", default="640x480", show_default=True, callback=_size, help="Image size WIDTHxHEIGHT.")(f)
     f = click.option("--view", "views", multiple=True,
-                     help="Camera preset (repeatable): frontal, right_buccal, left_buccal, maxillary, mandibular. Default: frontal.")(f)
-    f = click.option("--gif", is_flag=True, help="Also write animation.gif.")(f)
+                     help="Camera preset (repeatable): frontal, right_buccal, left_buccal, maxillary_occlusal, "
+                          "mandibular_occlusal. Default: frontal.")(f)
+    f = click.option("--gif", is_flag=True, help="Also write animation.gif (at the frame's size).")(f)
     f = click.option("--alpha", is_flag=True, help="PNG frames with a transparent background.")(f)
     f = click.option("--hide-roots", is_flag=True, help="Draw crowns only.")(f)
-    f = click.option("--frames-per-step", default=6, show_default=True, type=click.IntRange(1, 120),
-                     help="Animation frames per simulation step (positions interpolated between steps).")(f)
+    f = click.option("--frames-per-step", default=None, type=click.IntRange(1, 120),
+                     help="Animation frames per simulation step (positions interpolated between steps). "
+                          "Default: enough for --seconds.")(f)
+    f = click.option("--seconds", default=None, type=float,
+                     help=f"Length of the animation in seconds (default: at least {MIN_ANIMATION_S:g}).")(f)
+    f = click.option("--fps", default=30, show_default=True, type=int, help="Animation frames per second.")(f)
+    f = click.option("--split-views", is_flag=True,
+                     help="Also write each view's own PNG per frame (frames/<view>/NNNNN.png) besides the tiled frame.")(f)
+    f = click.option("--export-scene", type=click.Choice(["glb", "ply"]), default=None,
+                     help="Write the posed teeth at --export-steps for Blender, MeshLab or Open3D (scene/).")(f)
+    f = click.option("--export-steps", default=None, callback=_steps,
+                     help="Steps to export with --export-scene, comma-separated (default: first and last).")(f)
+    f = click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors and warnings.")(f)
+    f = click.option("-v", "--verbose", is_flag=True,
+                     help="Print each phase with its time even when the output is not a terminal.")(f)
     f = click.option("--contact-faces", is_flag=True,
                      help="Also colour the tooth surface inside each contact sphere (as in the paper's Figure 7).")(f)
     return f
@@ -97,7 +124,7 @@ def render_options(f):
 @render_options
 def run(case: Path, out_dir: Path | None, detector: str | None, **render_opts) -> None:
     """Run one case: simulate, detect, write frames and metrics."""
-    _run_case(case, out_dir or Path("out") / case.stem, detector, render_opts)
+    _run_case(case, out_dir or Path("out") / case.stem, run_options(detector, render_opts))
 
 
 @main.command()
@@ -109,7 +136,7 @@ def demo(out_dir: Path, **render_opts) -> None:
     from .case import DEFAULT_CASE
 
     render_opts["views"] = render_opts.get("views") or DEMO_VIEWS
-    _run_case(DEFAULT_CASE, out_dir, None, render_opts)
+    _run_case(DEFAULT_CASE, out_dir, run_options(None, render_opts))
 
 
 @main.command()
@@ -136,10 +163,11 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--no-png", is_flag=True, help="End to end without writing PNG frames (MP4 only).")
 @click.option("--no-simulate", is_flag=True, help="Skip the movement simulation (end to end on synthetic motion).")
 @click.option("--no-tree-build", is_flag=True, help="Skip timing the sphere-tree build from nothing.")
+@click.option("--no-startup", is_flag=True, help="Skip timing `orthosim run` from launch to its first step.")
 @click.option("--step-days", default=2.0, show_default=True, type=click.FloatRange(min=0.01),
               help="Simulation step for the bench, so the case's teeth keep moving through the measured frames.")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
-          no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool) -> None:
+          no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -150,11 +178,15 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
 
     record = run_bench(case, frames=frames, warmup=warmup, size=size, n_markers=markers,
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
-                       step_days=step_days, tree_build=not no_tree_build)
+                       step_days=step_days, tree_build=not no_tree_build, startup=not no_startup)
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
     click.echo(f"fps (median, target {record['target_fps']}): {shown} -> {out_file}")
+    if record.get("startup"):
+        st = record["startup"]
+        click.echo(f"start-up: first step {st['startup_s']:.2f} s after launching `orthosim run` (target {st['target_s']:.0f} s; "
+                   f"bare python {st['python_start_s']:.2f} s, load {st['load_avg_1min']:.1f})")
     trees = record.get("spheretree_build")
     if trees:
         click.echo(f"sphere trees of {trees['teeth']} teeth built in {trees['build_s']:.1f} s on {trees['workers']} cores "
@@ -235,18 +267,38 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
     click.echo(f"{case.name} ({detector}): {metrics['steps']} steps, total distance "
                f"{metrics['total_distance_mm']['initial']:.2f} -> {metrics['total_distance_mm']['final']:.2f} mm, "
                f"{metrics['collisions']} collisions, max penetration {metrics['max_penetration_mm']:.3f} mm -> {out_dir}/metrics.json")
+def run_options(detector: str | None, opts: dict) -> RunOptions:
+    """The RunOptions of the `run` and `demo` command-line options."""
+    return RunOptions(detector=detector, render=not opts["no_render"], views=tuple(opts["views"]) or ("frontal",),
+                      size=opts["size"], gif=opts["gif"], alpha=opts["alpha"], hide_roots=opts["hide_roots"],
+                      contact_faces=opts["contact_faces"], frames_per_step=opts["frames_per_step"],
+                      seconds=opts["seconds"], fps=opts["fps"], split_views=opts["split_views"],
+                      export_scene=opts["export_scene"], export_steps=opts["export_steps"],
+                      verbosity=0 if opts["quiet"] else 2 if opts["verbose"] else 1)
 
 
-def _render_steps(dent, records, extracted, out_dir: Path, opts: dict) -> dict:
-    """Render every simulated step (one frame per step and view) into out_dir/frames."""
+def _run_case(case_path: Path, out_dir: Path, options: RunOptions) -> dict:
+    """One run (`orthosim.run.run_case`) with this package's renderer; returns the run record (run.json)."""
+    from .run import run_case
+
+    def check_view(name: str) -> str:
+        from render.cameras import check_view
+
+        return check_view(name)
+
+    return run_case(case_path, out_dir, options, draw=_render_steps, check_view=check_view)
+
+
+def _render_steps(dent, records, out_dir: Path, options: RunOptions, *, extracted: frozenset[int], per_step: int,
+                  total: int, progress: bool) -> dict:
+    """Draw every simulated step (`per_step` frames each) into out_dir: frames, animation, split views."""
     from render.animation import render_run
     from render.timeline import frames_from_steps
 
-    frames = frames_from_steps(records, frozenset(extracted), opts.get("frames_per_step", 1))
-    return render_run(dent, frames, out_dir, views=opts.get("views") or ("frontal",), size=opts["size"],
-                      gif=opts.get("gif", False), alpha=opts.get("alpha", False),
-                      hide_roots=opts.get("hide_roots", False),
-                      color_contact_faces=opts.get("contact_faces", False))
+    frames = frames_from_steps(records, extracted, per_step)
+    return render_run(dent, frames, out_dir, views=options.views, size=options.size, gif=options.gif, alpha=options.alpha,
+                      hide_roots=options.hide_roots, color_contact_faces=options.contact_faces, fps=options.fps,
+                      split_views=options.split_views, total=total, progress=progress)
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:

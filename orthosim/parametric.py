@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 import trimesh
@@ -28,10 +29,11 @@ from . import fdi as F
 from .anatomy import dimensions
 from .archform import BetaArch, arch_with_half_length
 from .dentition import Dentition
-from .collision.exact import MeshQuery
 from .occlusion import molar_relation, overjet
 from .tooth import CROWN, Tooth, part_of_faces
-from .toothshape import build_tooth_shape
+
+if TYPE_CHECKING:  # imported where the model is built: a cached model needs neither FCL nor numba
+    from .collision.exact import MeshQuery
 
 CONTACT_GAP_MAX = 0.05  # mm: the largest gap accepted between teeth that should touch
 
@@ -61,6 +63,8 @@ class _Blank:
 
 
 def _blank(fdi: int, resolution) -> _Blank:
+    from .toothshape import build_tooth_shape
+
     shape = build_tooth_shape(dimensions(fdi), F.arch_of(fdi), F.tooth_type(fdi), resolution)
     mesh, landmarks = shape.mesh, dict(shape.landmarks)
     if F.quadrant(fdi) in (1, 3):  # mirror image: local +x is distal here (see orthosim.tooth)
@@ -233,6 +237,8 @@ def build_parametric_dentition(resolution: int | str = "smooth", third_molars: b
     """
     from scipy.optimize import least_squares
 
+    from .collision.exact import MeshQuery
+
     positions = range(1, 9) if third_molars else range(1, 8)
     fdis = [10 * q + p for q in F.QUADRANTS for p in positions]
     blanks = {n: _blank(n, resolution) for n in fdis}
@@ -314,5 +320,8 @@ def _as_tooth(blank: _Blank, pose: np.ndarray) -> Tooth:
 
 @lru_cache(maxsize=8)
 def parametric_dentition(resolution: int | str = "smooth", third_molars: bool = False, diastema_mm: float = 0.0) -> Dentition:
-    """The parametric model, built once per process for each set of arguments (Dentition is immutable)."""
-    return build_parametric_dentition(resolution, third_molars, diastema_mm)
+    """The parametric model, built once per process for each set of arguments (Dentition is immutable)
+    and kept on disk between processes (`orthosim.dentition_cache`)."""
+    from .dentition_cache import cached_dentition, parametric_parameters
+
+    return cached_dentition(parametric_parameters(resolution, third_molars, diastema_mm), lambda: build_parametric_dentition(resolution, third_molars, diastema_mm))

@@ -16,14 +16,17 @@ trunk and near the apex, which would force large leaf spheres on the sphere tree
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
-from scipy.interpolate import PchipInterpolator
 
 from .anatomy import ToothDimensions
 from .fdi import Arch, ToothType
 from .meshrefine import split_long_edges
+
+if TYPE_CHECKING:  # imported where a shape is built: reading a case's resolution names needs neither
+    import trimesh
+    from scipy.interpolate import PchipInterpolator
 
 TRUNK = 0.85  # root-trunk cross-section over the cervical one, multi-rooted teeth
 RESOLUTIONS = {"coarse": 10, "medium": 20, "smooth": 40, "fine": 64}
@@ -163,6 +166,8 @@ class _Occlusal:
 
 
 def _loft(rings: list[np.ndarray], bottom: np.ndarray, top: np.ndarray) -> trimesh.Trimesh:
+    import trimesh
+
     """Close a stack of rings (each (n, 3), same n, bottom to top) with a pole at each end."""
     n = len(rings[0])
     verts = np.vstack([bottom[None], *rings, top[None]])
@@ -187,6 +192,8 @@ def _loft(rings: list[np.ndarray], bottom: np.ndarray, top: np.ndarray) -> trime
 
 
 def _profile(points: list[tuple[float, float]]) -> PchipInterpolator:
+    from scipy.interpolate import PchipInterpolator
+
     ys, vs = zip(*points)
     return PchipInterpolator(np.array(ys), np.array(vs))
 
@@ -198,6 +205,8 @@ def build_tooth_shape(dims: ToothDimensions, arch: Arch, ttype: ToothType, resol
     RESOLUTIONS. The crown's mesiodistal extent equals `dims.md_width` exactly (the contact points
     are ring vertices), so arch lengths and Bolton ratios measured on the mesh match the table.
     """
+    import trimesh
+
     n = RESOLUTIONS[resolution] if isinstance(resolution, str) else int(resolution)
     if n < 6 or n % 2:
         raise ValueError(f"resolution must be an even number of ring points >= 6, got {n}")

@@ -7,8 +7,10 @@ images to a `FrameSink`, which encodes on background threads while the next fram
     Pillow's writer), each written to a temporary file then renamed (`orthosim.atomic`);
   - MP4: H.264 through the ffmpeg binary that the `imageio-ffmpeg` wheel ships, fed through a
     pipe (the encoder runs in its own process), written to a temporary file renamed at the end;
-  - GIF (optional): half size, palette per frame; for long runs every k-th frame only, k doubling
-    whenever more than GIF_MAX_FRAMES are kept, so memory stays bounded.
+  - GIF (optional): the frame's own size, palette per frame; for long runs every k-th frame only,
+    k doubling whenever more than GIF_MAX_FRAMES are kept, so memory stays bounded;
+  - split views (optional): besides the tiled frame, each view's image as
+    `frames/<view>/NNNNN.png`.
 The queues between the renderer and the encoders are bounded: a slow disk slows the run down
 instead of filling memory.
 """
@@ -93,28 +95,32 @@ class FrameSink:
     """Writes frames as PNG files and/or an MP4 (and a GIF), encoding on background threads."""
 
     def __init__(self, out_dir: str | Path, *, png: bool = True, mp4: bool = True, gif: bool = False,
-                 video_fps: int = VIDEO_FPS, png_threads: int = 2):
+                 video_fps: int = VIDEO_FPS, png_threads: int = 2, split_views: Sequence[str] = ()):
         self.out_dir = Path(out_dir)
         self.frames_dir = self.out_dir / "frames"
         self.png, self.mp4, self.gif = png, mp4, gif
         self.video_fps = video_fps
         self.count = 0
         self._stack = contextlib.ExitStack()
-        self._png_workers = [_Worker(f"png-{i}", self._write_png) for i in range(png_threads)] if png else []
+        self._png_workers = ([_Worker(f"png-{i}", self._write_png) for i in range(png_threads)]
+                             if png or split_views else [])
         self._video_worker = None
         self._video_size = None
         self._gif_frames: list = []
         self._gif_stride = 1
+        self.split_views = tuple(split_views)
         if png:
             self.frames_dir.mkdir(parents=True, exist_ok=True)
-        else:
+        for view in self.split_views:
+            (self.frames_dir / view).mkdir(parents=True, exist_ok=True)
+        if not png:
             self.out_dir.mkdir(parents=True, exist_ok=True)
 
     # ------------------------------------------------------------------------------ writers
     def _write_png(self, item):
-        index, image = item
+        index, image, folder = item
         data = encode_png(image)
-        with atomic_path(self.frames_dir / f"{index:05d}.png") as tmp:
+        with atomic_path(folder / f"{index:05d}.png") as tmp:
             tmp.write_bytes(data)
             os.chmod(tmp, _FILE_MODE)  # mkstemp makes the file private; frames are ordinary outputs
 
@@ -143,16 +149,19 @@ class FrameSink:
     def _keep_for_gif(self, image: np.ndarray):
         if self.count % self._gif_stride:
             return
-        self._gif_frames.append(np.ascontiguousarray(image[::2, ::2, :3]))
+        self._gif_frames.append(np.ascontiguousarray(image[:, :, :3]))
         if len(self._gif_frames) > GIF_MAX_FRAMES:
             self._gif_frames = self._gif_frames[::2]
             self._gif_stride *= 2
 
     # --------------------------------------------------------------------------------- API
-    def add(self, image: np.ndarray) -> None:
-        """Queue one frame, (h, w, 3) RGB or (h, w, 4) RGBA uint8; PNGs keep the alpha, video drops it."""
+    def add(self, image: np.ndarray, views: Sequence[np.ndarray] = ()) -> None:
+        """Queue one frame, (h, w, 3) RGB or (h, w, 4) RGBA uint8; PNGs keep the alpha, video drops it.
+        views: each split view's own image, in the order of `split_views`."""
         if self.png:
-            self._png_workers[self.count % len(self._png_workers)].put((self.count, image))
+            self._png_workers[self.count % len(self._png_workers)].put((self.count, image, self.frames_dir))
+        for i, (view, im) in enumerate(zip(self.split_views, views)):
+            self._png_workers[(self.count + i + 1) % len(self._png_workers)].put((self.count, im, self.frames_dir / view))
         if self.mp4:
             if self._video_worker is None:
                 self._start_video(image)
@@ -298,42 +307,54 @@ class _Progress:
 
 def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, views: Sequence[str] = ("frontal",),
                size: tuple[int, int] = (640, 480), gif: bool = False, alpha: bool = False, progress: bool = True,
-               hide_roots: bool = False, color_contact_faces: bool = False, png: bool = True, mp4: bool = True) -> dict:
+               hide_roots: bool = False, color_contact_faces: bool = False, png: bool = True, mp4: bool = True,
+               fps: int = VIDEO_FPS, split_views: bool = False, total: int | None = None) -> dict:
     """Render every state in `frames` into out_dir (frames/NNNNN.png, animation.mp4, animation.gif).
 
     `frames` is taken ahead on a thread (`prefetch`); `orthosim run` feeds it the records of a
     simulation running in a child process (`orthosim.background`), so that simulating the next
     steps and drawing this one use both cores instead of taking turns for one GIL.
 
+    fps: the animation's frames per second. split_views: also write each view's own PNG per frame.
+    total: the number of frames, when known (for the progress bar). A state given twice in a row
+    (the same object: a step in which nothing moved) is drawn once and its image repeated.
+
     Returns {"frames": n, "fps": end-to-end frames per second (render, read back, encode, write),
-    "render_fps": ..., "views": [...], "size": [w, h], ...}. The caller records it in metrics.json.
+    "render_fps": ..., "views": [...], "size": [w, h], "encode_s": time to flush the encoders, ...}.
+    The caller records it in run.json (it varies with the machine).
     """
     from .renderer import Renderer
     from .scene import DentitionScene
 
     views = [check_view(v) for v in (views or ("frontal",))]
     out_dir = Path(out_dir)
-    total = len(frames) if hasattr(frames, "__len__") else None
+    if total is None:
+        total = len(frames) if hasattr(frames, "__len__") else None
     scene = DentitionScene(dentition, size, hide_roots=hide_roots, color_contact_faces=color_contact_faces)
-    sink = FrameSink(out_dir, png=png, mp4=mp4, gif=gif)
+    sink = FrameSink(out_dir, png=png, mp4=mp4, gif=gif, video_fps=fps, split_views=views if split_views else ())
     bar = _Progress(progress, total)
     render_s = 0.0
     n = 0
     try:
         with Renderer(size, alpha=alpha) as renderer, _interrupt_between_frames() as interrupted:
             started = time.perf_counter()
+            previous = images = None
             for state in prefetch(frames):
-                t0 = time.perf_counter()
-                scene.update(state)
-                images = [renderer.render(scene, v) for v in views]
-                render_s += time.perf_counter() - t0
-                sink.add(tile(images))
+                if state is not previous:
+                    t0 = time.perf_counter()
+                    scene.update(state)
+                    images = [renderer.render(scene, v) for v in views]
+                    render_s += time.perf_counter() - t0
+                    previous = state
+                sink.add(tile(images), images if split_views else ())
                 n += 1
                 bar.update(n, n / max(time.perf_counter() - started, 1e-9))
                 interrupted()
             interrupted()
+            t_close = time.perf_counter()
             written = sink.close()
             elapsed = time.perf_counter() - started
+            encode_s = time.perf_counter() - t_close
             gl_renderer = renderer.gl_renderer
     except BaseException:
         sink.abort()
@@ -347,5 +368,7 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
         "views": list(views),
         "size": list(size),
         "gl_renderer": gl_renderer,
+        "video_fps": fps,
+        "encode_s": encode_s,
         "outputs": {k: v for k, v in written.items() if k != "frames"},
     }

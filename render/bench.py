@@ -25,6 +25,8 @@ machine does not move the figure; the end-to-end records also give frames / tota
     with the machine's load;
   - spheretree_build: the model's sphere trees built from nothing on every core, the same in one
     process (the baseline), and loaded from the cache, in seconds (target: under 10 s to build);
+  - startup_s: seconds from launching `orthosim run` to its first simulated step, warm caches
+    (`orthosim.startup_bench`, target 2 s), beside a bare interpreter start in the same minute;
   - memory_mb: resident set size before and after a long (default 2,000 frames) update+render
     run: leaked GL programs or buffers would show there.
 Components that are missing are reported as null with a "pending" note, never estimated.
@@ -182,7 +184,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
               frames: int = 300, warmup: int = 30, size=(640, 480), n_markers: int = 2000, memory_frames: int = 2000,
               variant_rounds: int = 4, collision_repeats: int = 20, work_dir: str | Path | None = None,
               png: bool = True, frames_per_step: int = 6, step_days: float | None = 2.0,
-              tree_build: bool = True) -> dict:
+              tree_build: bool = True, startup: bool = True) -> dict:
     """Measure and return the bench record (see the module docstring and the output contract).
 
     The model is `dentition` when given (then nothing is simulated), else the case's (default:
@@ -223,6 +225,9 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         extracted = frozenset(case_obj.extractions)
         model_name = f"{case_obj.name} ({case_path.name})"
     n_tri = {f: len(dentition.teeth[f].mesh.faces) for f in dentition.fdis}
+    from orthosim.startup_bench import startup_timings  # `orthosim run` launched to its first step, warm caches
+
+    startup_record = startup_timings(case if case is not None else DEFAULT_CASE) if startup else None
     # First, before any GL context or thread exists: the model's sphere trees built from nothing
     # (a first run on a new machine), over every core and, as the baseline, in one process.
     trees = tree_build_timings(dentition) if tree_build else None
@@ -404,6 +409,8 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
             k: (1e6 / v if v else None) for k, v in collision.get("collision_us_per_step", {}).items()},
         "collision": collision,
         "spheretree_build": trees,
+        "startup_s": None if startup_record is None else startup_record["startup_s"],
+        "startup": startup_record,
         "pending": pending,
         "render_variants": variants,
         "memory_mb": {"start": mem_start, "before_long_run": mem_before_long,

@@ -20,14 +20,19 @@ def frames_from_steps(records: Iterable, extracted: frozenset[int] = frozenset()
     """FrameStates for a sequence of step records (`orthosim.movement.simulation.StepRecord`).
 
     The first record (the initial state) gives one frame; every later record gives `per_step`
-    frames, the last of them the record itself.
+    frames, the last of them the record itself, so the animation's time runs evenly with the
+    treatment's days. A step in which nothing moved repeats one FrameState object `per_step` times
+    (the renderer draws it once and repeats the image).
     """
     if per_step < 1:
         raise ValueError(f"per_step must be at least 1, got {per_step}")
     previous = None
     for record in records:
         end = FrameState.from_step(record, extracted)
-        if previous is not None and per_step > 1 and record.moving:
+        if previous is not None and per_step > 1 and not record.moving:
+            for _ in range(1, per_step):
+                yield end
+        elif previous is not None and per_step > 1:
             for i in range(1, per_step):
                 t = i / per_step
                 poses = {n: (interpolate_pose(previous.poses[n], record.poses[n], t) if n in record.moving else pose)

@@ -22,7 +22,9 @@ def test_each_moving_step_gives_per_step_frames_on_the_detectors_motion():
     end_11[:3, 3] = [3.0, 0.0, -1.0]
     records = [record(0, start, ()), record(1, {11: end_11, 21: np.eye(4)}, (11,)), record(2, {11: end_11, 21: np.eye(4)}, ())]
     frames = list(frames_from_steps(records, per_step=4))
-    assert [f.step for f in frames] == [0, 1, 1, 1, 1, 2]  # a step with nothing moving is one frame
+    # every step lasts as long on screen; a step with nothing moving repeats one state
+    assert [f.step for f in frames] == [0, 1, 1, 1, 1, 2, 2, 2, 2]
+    assert frames[5] is frames[6] is frames[7] is frames[8]
     for i, f in enumerate(frames[1:4], start=1):
         assert np.allclose(f.poses[11], interpolate_pose(np.eye(4), end_11, i / 4))
         assert np.allclose(f.poses[21], np.eye(4))  # a tooth at rest is not interpolated

@@ -27,7 +27,8 @@ def mesh_folder(tmp_path):
 def test_build_writes_one_sph_per_tooth_named_by_fdi(tmp_path, mesh_folder, monkeypatch):
     monkeypatch.setenv("ORTHOSIM_CACHE", str(tmp_path / "cache"))
     out = tmp_path / "trees"
-    res = CliRunner().invoke(spheretree, ["build", str(mesh_folder), "--method", "octree", "--depth", "4", "--out", str(out)])
+    res = CliRunner().invoke(spheretree, ["build", str(mesh_folder), "--method", "octree", "--depth", "4", "--out", str(out),
+                                          "--numbering", "fdi"])
     assert res.exit_code == 0, res.output
     assert sorted(p.name for p in out.iterdir()) == ["11.sph", "21.sph"]
     mesh = trimesh.load(mesh_folder / "tooth_11.stl")
@@ -37,10 +38,23 @@ def test_build_writes_one_sph_per_tooth_named_by_fdi(tmp_path, mesh_folder, monk
     assert any((tmp_path / "cache").glob("*.npz"))  # built through the cache
 
 
+@pytest.mark.parametrize("numbering, names", [
+    (None, ["tooth_11.sph", "tooth_21.sph"]),  # numbering unknown: the files' own names, no FDI claimed
+    ("universal", ["23.sph", "34.sph"]),  # Universal 11 is the upper left canine, 21 the lower left first premolar
+])
+def test_trees_are_named_by_fdi_only_when_the_numbering_is_known(tmp_path, mesh_folder, monkeypatch, numbering, names):
+    monkeypatch.setenv("ORTHOSIM_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "trees"
+    args = ["build", str(mesh_folder), "--method", "octree", "--depth", "3", "--out", str(out)]
+    res = CliRunner().invoke(spheretree, args + (["--numbering", numbering] if numbering else []))
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in out.iterdir()) == names
+
+
 def test_eval_json_has_the_contract_fields(tmp_path, mesh_folder):
     out = tmp_path / "eval.json"
     res = CliRunner().invoke(spheretree, ["eval", str(mesh_folder), "--method", "fit", "--depth", "3",
-                                          "--samples", "20000", "--out", str(out)])
+                                          "--samples", "20000", "--out", str(out), "--numbering", "fdi"])
     assert res.exit_code == 0, res.output
     data = json.loads(out.read_text())
     assert [t["fdi"] for t in data["teeth"]] == [11, 21]

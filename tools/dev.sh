@@ -31,7 +31,9 @@ if [ ! -x .venv/bin/uv ]; then
 fi
 stamp=.venv/.orthosim-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ tools/overrides.txt -nt "$stamp" ]; then
-    .venv/bin/uv pip install -q --python .venv/bin/python --override tools/overrides.txt -e '.[test]'
+    # --compile-bytecode: imports read ready .pyc files instead of compiling every module on every
+    # run where __pycache__ cannot be written (or PYTHONDONTWRITEBYTECODE is set): seconds per start
+    .venv/bin/uv pip install -q --compile-bytecode --python .venv/bin/python --override tools/overrides.txt -e '.[test]'
     touch "$stamp"
 fi
 

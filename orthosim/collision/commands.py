@@ -11,7 +11,7 @@ from pathlib import Path
 import click
 
 from ..shareddata import open_full_jaw_dir
-from .contract import DETECTORS, CollisionRequest
+from .contract import DETECTORS, CollisionError, CollisionRequest
 
 
 
@@ -94,21 +94,48 @@ def bench(out_file: Path | None, resolution: str, repeats: int, trees: str, keep
 
 
 @collide.command()
+@click.argument("case", required=False, type=click.Path(path_type=Path))
+@click.option("--step", "step_number", type=click.IntRange(0), default=0, show_default=True,
+              help="With CASE: the simulation step to query (0: the initial state).")
 @click.option("--detector", type=click.Choice(DETECTORS), default="discrete", show_default=True)
-@click.option("--resolution", type=click.Choice(["coarse", "smooth"]), default="coarse", show_default=True)
+@click.option("--resolution", type=click.Choice(["coarse", "smooth"]), default="coarse", show_default=True,
+              help="Without CASE: the parametric model's resolution.")
 @click.option("--trees", type=click.Choice(["fit", "octree"]), default="fit", show_default=True,
               help="Sphere-tree builder method (trees are cached on disk).")
-def step(detector: str, resolution: str, trees: str) -> None:
-    """One whole-arch query on the parametric model at rest: which teeth touch."""
-    from ..parametric import parametric_dentition
+def step(case: Path | None, step_number: int, detector: str, resolution: str, trees: str) -> None:
+    """One whole-arch query: the case's teeth at a simulation step (default: the parametric model at rest)."""
     from ..spheretree.cache import cached_sphere_tree
     from .detect import detect_step
     from .model import CollisionModel
 
-    d = parametric_dentition(resolution=resolution)
-    model = CollisionModel.from_dentition(d, tree_builder=lambda mesh: cached_sphere_tree(mesh, method=trees))
-    poses = d.rest_poses()
-    res = detect_step(model, poses, poses, detector=detector, request=CollisionRequest())
-    click.echo(json.dumps({"detector": detector, "candidate_pairs": len(res.pairs),
+    builder = lambda mesh: cached_sphere_tree(mesh, method=trees)  # noqa: E731
+    if case is None:
+        from ..parametric import parametric_dentition
+
+        d = parametric_dentition(resolution=resolution)
+        model = CollisionModel.from_dentition(d, tree_builder=builder)
+        start = end = d.rest_poses()
+        pairs = None
+        where = {"model": d.description}
+    else:
+        from ..case import load_case
+        from ..movement.simulation import MovementModel, simulate
+
+        c = load_case(case)
+        if step_number > c.steps:
+            raise CollisionError(case, "--step", f"{step_number} is past the case's last step ({c.steps})",
+                                 f"give a step from 0 to {c.steps}")
+        movement = MovementModel.build(c, tree_builder=builder if trees != "fit" else None)
+        model = movement.collision
+        previous = record = None
+        for record in simulate(movement, c.detector, steps=step_number):  # the case's own detector moves the teeth
+            previous = previous if record.step == step_number else record
+        start = (previous or record).poses  # continuous: the motion into the step; others: its end poses
+        end = record.poses
+        pairs = list(movement.pairs)
+        where = {"case": c.name, "step": step_number, "time_days": record.time_days,
+                 "moving": sorted(record.moving)}
+    res = detect_step(model, start, end, pairs=pairs, detector=detector, request=CollisionRequest())
+    click.echo(json.dumps({**where, "detector": detector, "candidate_pairs": len(res.pairs),
                            "touching": [list(p) for p in res.touching_pairs()],
-                           "leaf_pairs": int(len(res.leaf_pairs))}))
+                           "leaf_pairs": int(len(res.leaf_pairs)), "first_time_of_contact": res.first_time_of_contact}))

@@ -2,8 +2,10 @@
 
 Modelled on FCL's CollisionRequest / CollisionResult. The simulator and the renderer read a
 `StepResult` and never need to know which detector produced it: bounding circles, discrete sphere
-trees, continuous sphere trees or the exact mesh test all fill the same fields (a detector that
-has no leaf spheres, such as circles or the exact test, leaves the leaf arrays empty).
+trees, continuous sphere trees or the exact mesh test all fill the same fields. The leaf arrays hold what is drawn as
+contact: overlapping leaf spheres for the sphere-tree detectors; for circles, which has no leaves,
+one sphere per touching pair marking the lens where its circles overlap (leaf index -1,
+`circles.overlap_spheres`); the exact test leaves them empty.
 
 Units: millimetres for positions and radii, arch frame for world-space arrays; time is the
 fraction of the step in [0, 1).

@@ -15,7 +15,7 @@ import numpy as np
 from .. import fdi as fdi_mod
 from . import exact
 from .broadphase import candidate_pairs, sweep_and_prune
-from .circles import bounding_circles, circles_overlap
+from .circles import bounding_circles, circles_overlap, overlap_spheres
 from .continuous import refine_time_of_contact, swept_leaves
 from .contract import DETECTORS, CollisionError, CollisionRequest, StepResult, empty_leaves
 from .discrete import overlapping_leaves
@@ -68,7 +68,14 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
     nan = np.full(p, np.nan)
     if detector == "circles":
         c, r = bounding_circles(model, P1)
-        return StepResult("circles", pairs_arr, circles_overlap(c, r, pair_idx), nan, **empty_leaves())
+        touching = circles_overlap(c, r, pair_idx)
+        # no tree leaves: each touching pair's contact is the lens of its two circles, one sphere
+        # given for both teeth (leaf index -1), so that the renderer draws circles contacts too
+        hit = np.flatnonzero(touching)
+        centers, radii = overlap_spheres(model, P1, pair_idx[hit])
+        leaves = dict(pair_of_leaf=hit.astype(np.int64), leaf_pairs=np.full((len(hit), 2), -1, np.int64),
+                      centers_a=centers, centers_b=centers.copy(), radii_a=radii, radii_b=radii.copy())
+        return StepResult("circles", pairs_arr, touching, nan, **leaves)
     if detector == "exact":
         return _exact_step(model, P1, pairs_arr, pair_idx, request)
     first_only = not request.all_leaf_pairs

@@ -13,7 +13,9 @@ interpenetration the movement added to any pair; `initial_penetration_mm` is the
 pair: `pair`, `initial_mm`, `final_mm`), and `per_step`: for every step its time (days), the pose of
 every tooth, the touching pairs, the tooth-to-tooth distances and their total, the largest
 interpenetration, the collisions (with the impact response) and the propagated forces (cN).
-distances.csv: one row per adjacent pair: pair, initial_mm, final_mm. Files are written atomically.
+distances.csv: one row per adjacent pair: pair, initial_mm, final_mm. distances_per_step.csv: one
+row per step: step, time_days, total_distance_mm and each pair's distance (mm), the series of
+`per_step` in a table. Files are written atomically.
 """
 
 from __future__ import annotations
@@ -95,7 +97,6 @@ class RunReport:
         s = m.settings
         return {
             "case": m.case.name,
-            "case_file": str(m.case.path),
             "detector": self.detector,
             "steps": last.step,
             "step_days": m.case.step_days,
@@ -149,10 +150,21 @@ class RunReport:
             out.write(f"{a.pair[0]}-{a.pair[1]},{a.distance_mm:.4f},{b.distance_mm:.4f}\n")
         return out.getvalue()
 
+    def distances_per_step_csv(self) -> str:
+        """One row per step: step, time_days, total_distance_mm, then each adjacent pair's distance (mm)."""
+        out = io.StringIO()
+        pairs = [d["pair"] for d in self.per_step[0]["distances_mm"]] if self.per_step else []
+        out.write(",".join(["step", "time_days", "total_distance_mm", *(f"{a}-{b}_mm" for a, b in pairs)]) + "\n")
+        for row in self.per_step:
+            values = [f"{d['mm']:.4f}" for d in row["distances_mm"]]
+            out.write(",".join([str(row["step"]), f"{row['time_days']:g}", f"{row['total_distance_mm']:.4f}", *values]) + "\n")
+        return out.getvalue()
+
     def write(self, out_dir: str | Path, extra: dict | None = None) -> dict:
-        """Write out_dir/metrics.json and out_dir/distances.csv; returns the metrics."""
+        """Write out_dir/metrics.json, distances.csv and distances_per_step.csv; returns the metrics."""
         out_dir = Path(out_dir)
         metrics = {**self.metrics(), **(extra or {})}
         write_json(out_dir / "metrics.json", metrics)
         write_text(out_dir / "distances.csv", self.distances_csv())
+        write_text(out_dir / "distances_per_step.csv", self.distances_per_step_csv())
         return metrics

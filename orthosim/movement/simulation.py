@@ -350,16 +350,17 @@ def _touching(model: MovementModel, detector: str, P: dict[int, np.ndarray], dis
     s = model.settings
     pairs = list(model.pairs)
     empty = (np.zeros((0, 3)), np.zeros(0))
-    if detector == "circles":
-        res = detect_step(model.collision, P, None, pairs, "circles")
-        return res.touching_pairs(), empty
     if detector == "exact":
         return [p for p in pairs if _exact_distance(model, P, p, distances) <= s.touch_tolerance_mm], empty
-    res = detect_step(model.collision, P, None, pairs, "discrete", CollisionRequest(all_leaf_pairs=True))
+    # circles: its contacts are the lenses of overlapping circles; the sphere-tree detectors: leaves
+    res = detect_step(model.collision, P, None, pairs, "circles" if detector == "circles" else "discrete",
+                      CollisionRequest(all_leaf_pairs=True))
     touching = res.touching_pairs()
     if detector == "continuous":
         touching = [p for p in touching if _exact_distance(model, P, p, distances) <= s.touch_tolerance_mm]
     keep = np.isin(res.pair_of_leaf, [i for i, p in enumerate(map(tuple, res.pairs.tolist())) if p in set(touching)])
+    if detector == "circles":  # one lens per pair, given for both teeth
+        return touching, (res.centers_a[keep], res.radii_a[keep])
     centers = np.concatenate([res.centers_a[keep], res.centers_b[keep]])
     radii = np.concatenate([res.radii_a[keep], res.radii_b[keep]])
     return touching, (centers, radii)

@@ -1,7 +1,11 @@
 """`orthosim spheretree build|eval`: sphere trees for a mesh, a folder of meshes or a case, and their figures.
 
-`build` writes one tree per tooth (Bradshaw `.sph` by default, named by FDI number: `11.sph`), going
-through the on-disk cache. `eval` builds each tree afresh (so the build time it reports is real),
+`build` writes one tree per tooth (Bradshaw `.sph` by default), going through the on-disk cache. A
+tree is named by FDI number (`11.sph`) only where the numbering is known: a case or an
+Open-Full-Jaw folder (whose `tooth_N.stl` are Universal numbers, converted), or mesh files with
+`--numbering fdi|universal` saying how to read the number in their names; otherwise by the file's
+own stem (`tooth_11.sph`), since `tooth_11` is FDI 11 in one dataset and Universal 11 (FDI 23) in
+another. `eval` builds each tree afresh (so the build time it reports is real),
 measures the paper's sphere outside volume and the coverage with `measure_tree`, and writes one JSON
 file: per tooth `fdi`, `leaves`, `sov_sum`, `sov_union`, `surface_coverage`, `build_s` (and more),
 and a `summary` (mean, min, max). Sources: a mesh file (STL/OBJ/PLY, used in its own frame), a
@@ -41,15 +45,31 @@ def _from_dentition(dent) -> list[NamedMesh]:
     ]
 
 
-def _fdi_in_name(stem: str) -> int | None:
-    from ..fdi import is_fdi
-
-    numbers = re.findall(r"\d+", stem)
-    return int(numbers[-1]) if numbers and is_fdi(int(numbers[-1])) else None
+NUMBERINGS = ("fdi", "universal")
 
 
-def load_source(source: Path) -> list[NamedMesh]:
-    """The tooth meshes named by `source` (see the module text), in a stable order."""
+def _fdi_in_name(path: Path, numbering: str | None) -> int | None:
+    """The FDI number of a mesh file from the last number in its name, read as `numbering` says;
+    None when no numbering is given (the file keeps its own name)."""
+    from ..fdi import is_fdi, universal_to_fdi
+
+    if numbering is None:
+        return None
+    numbers = re.findall(r"\d+", path.stem)
+    number = int(numbers[-1]) if numbers else None
+    if numbering == "universal" and number is not None and 1 <= number <= 32:
+        return universal_to_fdi(number)
+    if numbering == "fdi" and is_fdi(number):
+        return number
+    raise SphereTreeError(path, "--numbering", f"the name holds no {numbering.upper()} tooth number",
+                          "rename the file (e.g. tooth_11.stl) or leave out --numbering to keep the file's name")
+
+
+def load_source(source: Path, numbering: str | None = None) -> list[NamedMesh]:
+    """The tooth meshes named by `source` (see the module text), in a stable order.
+
+    numbering: how to read the tooth number in mesh file names ("fdi" or "universal"); None: the
+    trees keep the files' names. Cases and Open-Full-Jaw folders know their numbering already."""
     if not source.exists():
         raise SphereTreeError(source, None, "not found", "give a mesh file, a folder of meshes or a case .toml")
     if source.is_file() and source.suffix.lower() == ".toml":
@@ -73,11 +93,11 @@ def load_source(source: Path) -> list[NamedMesh]:
     out = []
     for p in files:
         mesh = load_tooth_mesh(p)
-        fdi = _fdi_in_name(p.stem)
+        fdi = _fdi_in_name(p, numbering)
         out.append(NamedMesh(str(fdi) if fdi else p.stem, fdi, np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)))
     names = [m.name for m in out]
     if len(set(names)) != len(names):
-        raise SphereTreeError(source, None, "two meshes would get the same output name", "give each tooth file a distinct FDI number in its name")
+        raise SphereTreeError(source, None, "two meshes would get the same output name", "give each tooth file a distinct tooth number in its name")
     return out
 
 
@@ -88,6 +108,9 @@ def _progress(items, desc: str, total: int | None = None):
 
 
 def _request_options(f):
+    f = click.option("--numbering", type=click.Choice(NUMBERINGS), default=None,
+                     help="How to read the tooth number in mesh file names (trees are then named by FDI). "
+                          "Default: keep the file names. Cases and Open-Full-Jaw folders need none.")(f)
     f = click.option("--depth", type=int, default=None, help="Levels with the root [default: 4 for fit, 6 for octree].")(f)
     f = click.option("--branch", "branching", type=int, default=8, show_default=True, help="Branching factor.")(f)
     f = click.option("--method", type=click.Choice(METHODS), default="fit", show_default=True,
@@ -114,7 +137,7 @@ def spheretree() -> None:
               help="Tree cache folder [default: $ORTHOSIM_CACHE or ~/.cache/orthosim/spheretrees].")
 @click.option("--no-cache", is_flag=True, help="Always build; neither read nor write the cache.")
 def build(source: Path, method: str, branching: int, depth: int | None, out_dir: Path, fmt: str,
-          cache_dir: Path | None, no_cache: bool) -> None:
+          cache_dir: Path | None, no_cache: bool, numbering: str | None) -> None:
     """Build the sphere tree of every tooth in SOURCE (mesh, folder or case .toml) into OUT."""
     import tempfile
 
@@ -123,7 +146,7 @@ def build(source: Path, method: str, branching: int, depth: int | None, out_dir:
 
     depth = _depth(method, depth)
     check_request(method, branching, depth, where="spheretree build")
-    meshes = load_source(source)
+    meshes = load_source(source, numbering)
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="orthosim-trees-") as scratch, _progress(None, "sphere trees", len(meshes)) as bar:
         # --no-cache: a throw-away cache, so nothing is read or kept, yet mirror pairs still build once
@@ -148,7 +171,7 @@ def build(source: Path, method: str, branching: int, depth: int | None, out_dir:
 @click.option("--surface-samples", type=int, default=200_000, show_default=True, help="Surface points for the coverage, per tooth.")
 @click.option("--seed", type=int, default=0, show_default=True)
 def evaluate(source: Path, method: str, branching: int, depth: int | None, out_file: Path, samples: int,
-             surface_samples: int, seed: int) -> None:
+             surface_samples: int, seed: int, numbering: str | None) -> None:
     """Build and measure the trees of SOURCE: SOV (summed, union), coverage, build time -> JSON."""
     from ..atomic import write_json
     from .build import build_sphere_tree
@@ -160,7 +183,7 @@ def evaluate(source: Path, method: str, branching: int, depth: int | None, out_f
         raise SphereTreeError("spheretree eval", "--surface-samples", f"{surface_samples} is too few to vouch for coverage", "use at least 100000")
     if samples < 10_000:
         raise SphereTreeError("spheretree eval", "--samples", f"{samples} gives a useless error bar", "use at least 10000")
-    meshes = load_source(source)
+    meshes = load_source(source, numbering)
     rows = []
     for m in _progress(meshes, "sphere trees"):
         t0 = time.perf_counter()

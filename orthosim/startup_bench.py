@@ -1,0 +1,72 @@
+"""`orthosim bench`'s start-up figure: seconds from launching `orthosim run` to its first simulated step.
+
+Measured from outside, as a user waits: the command is started as a new process (`--verbose`, which
+prints "first step after ..." when the first step record reaches the drawing process), and the
+clock runs from the launch to the moment that line arrives. The caches are warmed by one run
+first (dentitions and sphere trees on disk, numba's compiled kernels), then `runs` runs are timed
+and the median reported. Beside it, measured in the same way and the same minute so that the
+machine's load can be read off: a bare interpreter start and the import of the simulation modules.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+TARGET_S = 2.0
+_FIRST_STEP = "first step after"
+
+
+def _timed_run(case: Path, out_dir: Path, size: str) -> tuple[float, float]:
+    """(seconds to the first-step line, seconds to the end) of one `orthosim run`, from its launch."""
+    cmd = [sys.executable, "-c", "from orthosim.cli import entry; entry()", "run", str(case), "--out", str(out_dir),
+           "--verbose", "--size", size, "--frames-per-step", "1"]
+    env = {**os.environ, "PYOPENGL_PLATFORM": os.environ.get("PYOPENGL_PLATFORM", "osmesa")}
+    started = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
+    first = None
+    lines = []
+    for line in proc.stderr:
+        lines.append(line)
+        if first is None and line.startswith(_FIRST_STEP):
+            first = time.perf_counter() - started
+    code = proc.wait()
+    if code != 0 or first is None:
+        raise RuntimeError(f"orthosim run exited with {code} before its first step: {''.join(lines[-3:]).strip()}")
+    return first, time.perf_counter() - started
+
+
+def _timed_python(code: str) -> float:
+    started = time.perf_counter()
+    subprocess.run([sys.executable, "-c", code], check=True)
+    return time.perf_counter() - started
+
+
+def startup_timings(case: str | Path, runs: int = 3, size: str = "160x120") -> dict:
+    """{"startup_s": median seconds to the first step over `runs` warm runs, ...} (see the module doc)."""
+    case = Path(case)
+    with tempfile.TemporaryDirectory(prefix="orthosim-startup-") as tmp:
+        _timed_run(case, Path(tmp) / "warm", size)  # fills every cache
+        firsts, totals, interpreter, imports = [], [], [], []
+        for i in range(runs):  # interleaved, so that each figure sees the same load
+            interpreter.append(_timed_python("pass"))
+            imports.append(_timed_python("import orthosim.movement.simulation"))
+            first, total = _timed_run(case, Path(tmp) / f"run{i}", size)
+            firsts.append(first)
+            totals.append(total)
+    return {
+        "case": case.name,
+        "startup_s": statistics.median(firsts),
+        "startup_s_runs": firsts,
+        "target_s": TARGET_S,
+        "run_total_s": statistics.median(totals),
+        "python_start_s": statistics.median(interpreter),
+        "import_simulation_s": statistics.median(imports),
+        "load_avg_1min": os.getloadavg()[0],
+        "note": "from launching `orthosim run` to its first step record reaching the drawing process, warm caches",
+    }

@@ -1,0 +1,100 @@
+"""Built dentitions come back from the disk cache unchanged; a damaged entry is rebuilt with a warning;
+two processes filling the same entry at once both get whole teeth."""
+
+import multiprocessing
+import warnings
+
+import numpy as np
+import pytest
+import trimesh
+
+from orthosim.dentition import Dentition
+from orthosim.dentition_cache import DentitionCacheWarning, cached_dentition, entry_path, is_cached
+from orthosim.tooth import Tooth, part_of_faces
+
+PARAMS = {"kind": "test", "size_mm": 8.0}
+
+
+def small_dentition(size_mm: float = 8.0) -> Dentition:
+    """Two box 'teeth' side by side: enough to check every stored field."""
+    teeth = {}
+    for n, x in ((11, -5.0), (21, 5.0)):
+        mesh = trimesh.creation.box(extents=[size_mm, size_mm * 2, size_mm])
+        pose = np.eye(4)
+        pose[0, 3] = x
+        teeth[n] = Tooth(n, mesh, part_of_faces(mesh), np.array([0.0, 4.0, 0.0]), np.array([0.0, -8.0, 0.0]), pose,
+                         {"incisal_edge": np.array([0.0, 8.0, 0.5])}, source=f"box {n}")
+    return Dentition(teeth, "two boxes", {"kind": "test", "arch": {"width_mm": 10.0}, "scan_to_arch": np.eye(4)})
+
+
+def build_counting(counter: list):
+    def build():
+        counter.append(1)
+        warnings.warn("tooth 11: repaired mesh: filled 1 hole", UserWarning)
+        return small_dentition()
+    return build
+
+
+def test_a_cached_dentition_is_the_built_one_and_is_not_built_again(tmp_path):
+    built: list = []
+    with pytest.warns(UserWarning, match="repaired mesh"):
+        first = cached_dentition(PARAMS, build_counting(built), cache_dir=tmp_path)
+    assert is_cached(PARAMS, cache_dir=tmp_path)
+    with pytest.warns(UserWarning, match="repaired mesh"):  # the build's warnings come with every load
+        again = cached_dentition(PARAMS, build_counting(built), cache_dir=tmp_path)
+    assert len(built) == 1
+    assert again.description == first.description and again.info == first.info
+    for n, t in first.teeth.items():
+        u = again.teeth[n]
+        assert np.array_equal(u.mesh.vertices, t.mesh.vertices) and np.array_equal(u.mesh.faces, t.mesh.faces)
+        assert np.array_equal(u.rest_pose, t.rest_pose) and np.array_equal(u.face_part, t.face_part)
+        assert np.array_equal(u.landmarks["incisal_edge"], t.landmarks["incisal_edge"]) and u.source == t.source
+
+
+def test_other_parameters_or_input_bytes_are_another_entry(tmp_path):
+    mesh = tmp_path / "tooth_11.stl"
+    mesh.write_bytes(b"solid a")
+    key = entry_path(PARAMS, [mesh], tmp_path)
+    assert entry_path({**PARAMS, "size_mm": 9.0}, [mesh], tmp_path) != key
+    mesh.write_bytes(b"solid b")
+    assert entry_path(PARAMS, [mesh], tmp_path) != key
+
+
+def test_a_damaged_entry_is_rebuilt_with_a_one_line_warning(tmp_path):
+    built: list = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cached_dentition(PARAMS, build_counting(built), cache_dir=tmp_path)
+    path = entry_path(PARAMS, cache_dir=tmp_path)
+    path.write_bytes(path.read_bytes()[:1000])  # cut short, as by a full disk
+    with pytest.warns(DentitionCacheWarning, match="unreadable") as caught:
+        dent = cached_dentition(PARAMS, build_counting(built), cache_dir=tmp_path)
+    assert len(built) == 2 and set(dent.teeth) == {11, 21}
+    assert all("\n" not in str(w.message) for w in caught)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cached_dentition(PARAMS, build_counting(built), cache_dir=tmp_path)  # whole again: loaded
+    assert len(built) == 2
+
+
+def _fill(cache_dir, queue):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        dent = cached_dentition(PARAMS, small_dentition, cache_dir=cache_dir)
+    queue.put(len(dent.teeth))
+
+
+def test_two_processes_filling_one_entry_at_once_both_get_whole_teeth(tmp_path):
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    procs = [ctx.Process(target=_fill, args=(tmp_path, queue)) for _ in range(2)]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(60)
+    assert [p.exitcode for p in procs] == [0, 0]
+    assert sorted(queue.get(timeout=5) for _ in procs) == [2, 2]
+    assert not list(tmp_path.glob(".*"))  # no temporary file left
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the entry loads without a damage warning
+        assert len(cached_dentition(PARAMS, lambda: pytest.fail("rebuilt"), cache_dir=tmp_path).teeth) == 2
