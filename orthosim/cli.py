@@ -162,6 +162,41 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
                    f"loaded in {1000 * trees['load_s']:.0f} ms")
 
 
+@main.command()
+@click.argument("case", type=click.Path(path_type=Path))
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Output folder.")
+@click.option("--limits", default=None,
+              help="Per-stage limits (mm, degrees); any subset of mesial=0.25,buccal=0.25,extrusion=0.15,tip=2,torque=1,rotation=2.")
+@click.option("--no-render", is_flag=True, help="Write the chart and poses only; no animation.")
+@click.option("--size", default="640x480", show_default=True, callback=_size, help="Image size WIDTHxHEIGHT.")
+@click.option("--view", "views", multiple=True, help="Camera preset (repeatable). Default: frontal and mandibular_occlusal.")
+@click.option("--frames-per-stage", default=6, show_default=True, type=click.IntRange(1, 120), help="Animation frames per stage.")
+@click.option("--gif", is_flag=True, help="Also write animation.gif.")
+def stage(case: Path, out_dir: Path, limits: str | None, no_render: bool, size, views, frames_per_stage: int, gif: bool) -> None:
+    """Split a case's set-up ([target]) into aligner stages: within per-stage limits, free of contact."""
+    from .runfolder import write_run_record
+    from .staging.chart import summary_line, write_outputs
+    from .staging.commands import plan_case
+    from .staging.limits import StageLimits
+
+    parsed = StageLimits.parse(limits)
+    if not no_render:
+        from render.cameras import check_view
+
+        views = [check_view(v) for v in views or ("frontal", "mandibular_occlusal")]
+    run = plan_case(case, parsed)
+    extra = {"kind": "staging", "stages": run.plan.n_stages, "lower_bound": run.plan.lower_bound,
+             "ipr_total_mm": run.plan.ipr_total_mm, "planning_s": run.plan.planning_s}
+    if not no_render:
+        from render.staging import render_staging
+
+        extra["animation"] = render_staging(run, out_dir, views=views, size=size,
+                                            frames_per_stage=frames_per_stage, gif=gif)
+    write_outputs(run.plan, out_dir, case)
+    write_run_record(out_dir, case, "continuous", extra)  # last: marks the folder finished
+    click.echo(f"{summary_line(run.plan, run.case.name)} -> {out_dir}/staging.csv")
+
+
 def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> None:
     """Simulate the case (orthosim.movement), draw its steps unless --no-render, write
     out_dir/metrics.json and out_dir/distances.csv.

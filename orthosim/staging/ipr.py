@@ -73,14 +73,14 @@ def penetration_along(obj_a, pose_a: np.ndarray, obj_b, pose_b: np.ndarray, dire
     return hi
 
 
-def reduction_for(model, dentition, a: int, b: int, pose_a: np.ndarray, pose_b: np.ndarray) -> InterproximalReduction:
+def reduction_for(model, dentition, a: int, b: int, pose_a: np.ndarray, pose_b: np.ndarray, source=None) -> InterproximalReduction:
     """The IPR that lets neighbours a and b (FDI) stand at the given target poses."""
     ca = dentition.teeth[a].to_world(dentition.teeth[a].crown_center, pose_a)
     cb = dentition.teeth[b].to_world(dentition.teeth[b].crown_center, pose_b)
     u = (cb - ca) / np.linalg.norm(cb - ca)
     amount = penetration_along(model.fcl_object(model.index[a]), pose_a, model.fcl_object(model.index[b]), pose_b, u)
     if amount > MAX_IPR_MM:
-        raise StagingError(None, f"target of teeth {a} and {b}",
+        raise StagingError(source, f"target of teeth {a} and {b}",
                            f"the two teeth overlap by more than {MAX_IPR_MM:g} mm at the target: no reduction can make room",
                            "check the target movements of these teeth (units, signs)")
     return InterproximalReduction(a, b, float(amount), u)

@@ -99,9 +99,10 @@ def stage_counts(totals: np.ndarray, limits: StageLimits) -> np.ndarray:
 
 def plan_staging(dentition: Dentition, start: dict[int, np.ndarray], target: dict[int, np.ndarray],
                  limits: StageLimits = StageLimits(), model: CollisionModel | None = None,
-                 absent: frozenset[int] = frozenset(), max_stages: int | None = None) -> StagingPlan:
+                 absent: frozenset[int] = frozenset(), max_stages: int | None = None, source=None) -> StagingPlan:
     """Plan the stages from `start` to `target` (FDI -> (4, 4) poses; teeth in `absent`, e.g.
-    extracted, take no part). Raises StagingError when no contact-free staging is found."""
+    extracted, take no part). Raises StagingError (naming `source`, the case file, if given) when
+    no contact-free staging is found."""
     started = time.perf_counter()
     teeth = tuple(n for n in dentition.fdis if n not in absent)
     if model is None:
@@ -116,10 +117,10 @@ def plan_staging(dentition: Dentition, start: dict[int, np.ndarray], target: dic
     at_start = checker.contacts(starts, starts)
     if at_start:
         c = at_start[0]
-        raise StagingError(None, f"start poses of teeth {c.a} and {c.b}",
+        raise StagingError(source, f"start poses of teeth {c.a} and {c.b}",
                            f"intersect before any movement ({len(at_start)} intersecting pair(s))",
                            "stage from a contact-free start (separate the teeth or fix the model)")
-    ipr = _reductions(dentition, model, checker, targets, teeth)
+    ipr = _reductions(dentition, model, checker, targets, teeth, source)
     if ipr:
         checker = StageChecker(model, {(r.a, r.b): r.shifts() for r in ipr})
     moving = np.array([np.any(np.abs(targets[n] - starts[n]) > 0) for n in teeth])
@@ -128,7 +129,7 @@ def plan_staging(dentition: Dentition, start: dict[int, np.ndarray], target: dic
     for _ in range(2 * len(teeth)):
         try:
             rows, held = _greedy(checker, dentition, teeth, order, starts, targets, rate, lower, moving, after,
-                                 max_stages or (10 * lower + 50))
+                                 max_stages or (10 * lower + 50), source)
         except _Stuck as stuck:
             stage, contacts = stuck.args
         else:
@@ -147,10 +148,10 @@ def plan_staging(dentition: Dentition, start: dict[int, np.ndarray], target: dic
             added = True
         if not added:
             pairs = ", ".join(f"{c.a}-{c.b}" for c in contacts)
-            raise StagingError(None, f"teeth {pairs}",
+            raise StagingError(source, f"teeth {pairs}",
                                f"cannot move on from stage {stage} without contact along their paths, in any order tried",
                                "change the target so the teeth can pass (e.g. more space, or a different path)")
-    raise StagingError(None, "staging", "no contact-free order found", "change the target so the teeth can pass")
+    raise StagingError(source, "staging", "no contact-free order found", "change the target so the teeth can pass")
 
 
 class _Stuck(Exception):
@@ -177,7 +178,7 @@ def _path_approach(dentition, teeth, starts, targets, i: int, j: int) -> float:
     return float((ci1 - ci0) @ ((cj - ci0) / np.linalg.norm(cj - ci0)))
 
 
-def _greedy(checker, dentition, teeth, order, starts, targets, rate, lower, moving, after, cap):
+def _greedy(checker, dentition, teeth, order, starts, targets, rate, lower, moving, after, cap, source):
     """One pass of the stage-by-stage planner under the `after` constraints: (rows, held) when it
     reaches the target; _Stuck(stage, contacts) when no tooth can move on without contact."""
     s = np.where(moving, 0.0, 1.0)
@@ -187,7 +188,7 @@ def _greedy(checker, dentition, teeth, order, starts, targets, rate, lower, movi
     while np.any(s < 1.0):
         k = len(rows) - 1
         if k >= cap:
-            raise StagingError(None, "staging", f"not finished after {cap} stages", "relax the limits or check the target")
+            raise StagingError(source, "staging", f"not finished after {cap} stages", "relax the limits or check the target")
         goal = min(1.0, (k + 1) * step)
         proposal = np.minimum(1.0, s + np.minimum(rate, np.maximum(step, goal - s)))
         proposal[proposal > 1.0 - _EPS] = 1.0  # float dust of k steps of 1 / k
@@ -203,7 +204,7 @@ def _greedy(checker, dentition, teeth, order, starts, targets, rate, lower, movi
     return rows, held
 
 
-def _reductions(dentition, model, checker, targets, teeth) -> list[InterproximalReduction]:
+def _reductions(dentition, model, checker, targets, teeth, source) -> list[InterproximalReduction]:
     """IPR for each pair of arch neighbours intersecting at the target; StagingError for any other
     intersecting pair (teeth that are not neighbours cannot be stripped apart)."""
     neighbours = {tuple(sorted(p)) for p in arch_neighbour_pairs(teeth)}
@@ -211,9 +212,9 @@ def _reductions(dentition, model, checker, targets, teeth) -> list[Interproximal
     for c in checker.contacts(targets, targets):
         if (c.a, c.b) not in neighbours:
             where = "of opposing arches" if F.arch_of(c.a) is not F.arch_of(c.b) else "that are not neighbours"
-            raise StagingError(None, f"target of teeth {c.a} and {c.b}", f"the teeth intersect at the target ({where})",
+            raise StagingError(source, f"target of teeth {c.a} and {c.b}", f"the teeth intersect at the target ({where})",
                                "change the target so these teeth do not meet there")
-        out.append(reduction_for(model, dentition, c.a, c.b, targets[c.a], targets[c.b]))
+        out.append(reduction_for(model, dentition, c.a, c.b, targets[c.a], targets[c.b], source))
     return out
 
 
