@@ -116,6 +116,11 @@ def read_target(path: Path, raw: Any, present: set[int], extracted: set[int], se
 
     keys = tuple(str(k) for k in raw) if isinstance(raw, dict) else ()
     allowed = _TARGET_KEYS if section == "target" else ()
+    if section == "start" and isinstance(raw, dict):
+        for k in keys:
+            if not k.isdigit():
+                raise CaseError(path, f"start.{k}", "unknown key",
+                                "[start] takes per-tooth tables only, e.g. [start.41] buccal_mm = -2")
     r = _Reader(path, section, raw, allowed + tuple(k for k in keys if k.isdigit()))
     teeth = [k for k in r.table if k.isdigit()]
     if "folder" in r.table:
@@ -206,20 +211,17 @@ def register_target_mesh(local_mesh, start_pose: np.ndarray, target_mesh) -> tup
     """(M (4, 4), rms mm): the rigid motion taking the tooth at its start pose onto `target_mesh`,
     and the RMS distance (mm) of the moved start vertices to the target surface.
 
-    Same vertex count: correspondence by index (Procrustes, exact for a rigidly moved copy of the
-    same mesh). Otherwise trimesh's ICP from the centroid offset.
+    trimesh's ICP (vertices to the target surface) from the centroid offset: no correspondence by
+    vertex index is assumed, since a mesh file written and read again may merge or reorder vertices.
     """
     import trimesh
 
     start_v = np.asarray(local_mesh.vertices, float) @ start_pose[:3, :3].T + start_pose[:3, 3]
     tv = np.asarray(target_mesh.vertices, float)
-    if len(tv) == len(start_v):
-        M, _, _ = trimesh.registration.procrustes(start_v, tv, reflection=False, scale=False, return_cost=True)
-    else:
-        guess = np.eye(4)
-        guess[:3, 3] = tv.mean(axis=0) - start_v.mean(axis=0)
-        M, _, _ = trimesh.registration.icp(start_v, target_mesh, initial=guess, threshold=1e-7, max_iterations=200,
-                                           reflection=False, scale=False)
+    guess = np.eye(4)
+    guess[:3, 3] = tv.mean(axis=0) - start_v.mean(axis=0)
+    M, _, _ = trimesh.registration.icp(start_v, target_mesh, initial=guess, threshold=1e-9, max_iterations=300,
+                                       reflection=False, scale=False)
     moved = start_v @ M[:3, :3].T + M[:3, 3]
     _, dist, _ = trimesh.proximity.closest_point(target_mesh, moved)
     return np.asarray(M, float), float(math.sqrt(float(np.mean(dist ** 2))))
