@@ -136,10 +136,11 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--no-png", is_flag=True, help="End to end without writing PNG frames (MP4 only).")
 @click.option("--no-simulate", is_flag=True, help="Skip the movement simulation (end to end on synthetic motion).")
 @click.option("--no-tree-build", is_flag=True, help="Skip timing the sphere-tree build from nothing.")
+@click.option("--no-staging", is_flag=True, help="Skip timing the aligner staging planner (shipped staging cases, 28-tooth set-up).")
 @click.option("--step-days", default=2.0, show_default=True, type=click.FloatRange(min=0.01),
               help="Simulation step for the bench, so the case's teeth keep moving through the measured frames.")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
-          no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool) -> None:
+          no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_staging: bool) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -150,7 +151,7 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
 
     record = run_bench(case, frames=frames, warmup=warmup, size=size, n_markers=markers,
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
-                       step_days=step_days, tree_build=not no_tree_build)
+                       step_days=step_days, tree_build=not no_tree_build, staging=not no_staging)
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
@@ -160,6 +161,11 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
         click.echo(f"sphere trees of {trees['teeth']} teeth built in {trees['build_s']:.1f} s on {trees['workers']} cores "
                    f"(target {trees['target_s']:.0f} s; one process {trees['build_s_one_process']:.1f} s), "
                    f"loaded in {1000 * trees['load_s']:.0f} ms")
+    staged = record.get("staging")
+    if staged:
+        big = staged["setup_28_teeth"]
+        click.echo(f"staging: {big['teeth']} teeth, {big['stages']} stages planned in {big['staging_s']:.1f} s "
+                   f"(target {big['target_s']:.0f} s); " + ", ".join(f"{k} {v['staging_s']:.1f} s" for k, v in staged["cases"].items()))
 
 
 @main.command()

@@ -206,3 +206,13 @@ def test_stage_command_refuses_a_case_without_target_in_one_line(tmp_path):
     assert r.returncode == 2, r.stderr
     assert r.stderr.count("\n") == 1 and "target: missing" in r.stderr
     assert not out.exists()
+
+
+def test_the_bench_setup_moves_all_28_teeth_with_a_lower_bound_of_30(dent):
+    from orthosim.staging.bench import big_setup
+    from orthosim.staging.plan import stage_counts
+
+    start, target = big_setup(dent)
+    totals = np.stack([movement_components(dent.teeth[n], start[n], start[n], target[n]) for n in dent.fdis])
+    counts = stage_counts(totals, StageLimits())
+    assert len(dent.fdis) == 28 and np.all(counts > 0) and counts.max() == 30
