@@ -55,4 +55,9 @@ def render_staging(run, out_dir: str | Path, views: Sequence[str] = ("frontal",)
     from .animation import render_run
 
     frames = list(staging_frames(run, frames_per_stage))
-    return render_run(run.dentition, frames, out_dir, views=views, size=size, gif=gif, hide_roots=hide_roots)
+    record = render_run(run.dentition, frames, out_dir, views=views, size=size, gif=gif, hide_roots=hide_roots)
+    # a longer staging staged into this folder before left more frames: they are not this plan's
+    for stale in Path(out_dir, "frames").glob("[0-9][0-9][0-9][0-9][0-9].png"):
+        if int(stale.stem) >= record["frames"]:
+            stale.unlink()
+    return record
