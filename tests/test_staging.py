@@ -216,3 +216,24 @@ def test_the_bench_setup_moves_all_28_teeth_with_a_lower_bound_of_30(dent):
     totals = np.stack([movement_components(dent.teeth[n], start[n], start[n], target[n]) for n in dent.fdis])
     counts = stage_counts(totals, StageLimits())
     assert len(dent.fdis) == 28 and np.all(counts > 0) and counts.max() == 30
+
+
+def test_stage_command_writes_the_chart_the_poses_and_the_summary(tmp_path):
+    import csv
+    import json
+
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-c", "from orthosim.cli import entry; entry()", "stage",
+                        str(CASES_DIR / "staging_midline_diastema.toml"), "--out", str(out), "--no-render"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "4 stages (lower bound 4), IPR total 0.00 mm" in r.stdout
+    stages = json.loads((out / "stages.json").read_text())
+    assert stages["stages"] == 4 and len(stages["poses"]) == 5 and len(stages["poses"][0]["poses"]) == 28
+    rows = list(csv.DictReader((out / "staging.csv").open()))
+    assert len(rows) == 4 * 28
+    moved = [float(x["mesial_mm"]) for x in rows if x["fdi"] == "11"]
+    assert moved == pytest.approx([0.25] * 4, abs=1e-4)  # 1 mm mesial in four equal stages
+    assert (out / "ipr.csv").read_text().startswith("fdi_a,fdi_b,ipr_mm")
+    assert json.loads((out / "run.json").read_text())["complete"] is True
+    assert not list(out.glob(".*"))
