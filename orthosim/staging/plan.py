@@ -244,7 +244,8 @@ def _resolve(checker: StageChecker, dentition, teeth, order, starts, targets, s,
             for i in pick:
                 proposal[i] = s[i]
                 held.append(teeth[i])
-    return proposal, held, first
+    # every round held a tooth per contact; should contacts remain, nothing moves this stage
+    return s.copy(), held + [n for i, n in enumerate(teeth) if proposal[i] > s[i]], first
 
 
 def _choose_hold(checker, dentition, teeth, starts, targets, s, proposal, ia, ib, P0) -> list[int]:
