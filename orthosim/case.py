@@ -103,6 +103,7 @@ class Case:
     step_days: float
     detector: str
     simulation: Simulation = Simulation()
+    staging: Any = None  # orthosim.staging.target.CaseStaging: the [start] and [target] sections, or None
 
     @property
     def steps(self) -> int:
@@ -220,7 +221,7 @@ def _ranges(teeth: set[int]) -> str:
     return ", ".join(str(t) for t in sorted(teeth))
 
 
-_TOP = ("case", "model", "treatment", "wire", "loads", "simulation")
+_TOP = ("case", "model", "treatment", "wire", "loads", "simulation", "start", "target")
 _CASE = ("name", "description")
 _MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files", "scale")
 _TREATMENT = ("extractions", "duration_days", "step_days", "detector")
@@ -279,7 +280,10 @@ def load_case(path: str | Path) -> Case:
         top.fail("loads", "must be an array of tables", "write each load as [[loads]]")
     loads = tuple(_read_load(path, i, raw, present, set(extractions), wire) for i, raw in enumerate(raw_loads))
     simulation = _read_simulation(_Reader(path, "simulation", top.get("simulation", {}), _SIMULATION))
-    return Case(path, name, description, model, tuple(extractions), loads, wire, duration, step, detector, simulation)
+    from .staging.target import read_case_staging
+
+    staging = read_case_staging(path, data, present, set(extractions))
+    return Case(path, name, description, model, tuple(extractions), loads, wire, duration, step, detector, simulation, staging)
 
 
 def _read_simulation(r: _Reader) -> Simulation:

@@ -164,10 +164,12 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--no-simulate", is_flag=True, help="Skip the movement simulation (end to end on synthetic motion).")
 @click.option("--no-tree-build", is_flag=True, help="Skip timing the sphere-tree build from nothing.")
 @click.option("--no-startup", is_flag=True, help="Skip timing `orthosim run` from launch to its first step.")
+@click.option("--no-staging", is_flag=True, help="Skip timing the aligner staging planner (shipped staging cases, 28-tooth set-up).")
 @click.option("--step-days", default=2.0, show_default=True, type=click.FloatRange(min=0.01),
               help="Simulation step for the bench, so the case's teeth keep moving through the measured frames.")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
-          no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool) -> None:
+          no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool,
+          no_staging: bool) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -178,7 +180,8 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
 
     record = run_bench(case, frames=frames, warmup=warmup, size=size, n_markers=markers,
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
-                       step_days=step_days, tree_build=not no_tree_build, startup=not no_startup)
+                       step_days=step_days, tree_build=not no_tree_build, startup=not no_startup,
+                       staging=not no_staging)
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
@@ -192,6 +195,46 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
         click.echo(f"sphere trees of {trees['teeth']} teeth built in {trees['build_s']:.1f} s on {trees['workers']} cores "
                    f"(target {trees['target_s']:.0f} s; one process {trees['build_s_one_process']:.1f} s), "
                    f"loaded in {1000 * trees['load_s']:.0f} ms")
+    staged = record.get("staging")
+    if staged:
+        big = staged["setup_28_teeth"]
+        click.echo(f"staging: {big['teeth']} teeth, {big['stages']} stages planned in {big['staging_s']:.1f} s "
+                   f"(target {big['target_s']:.0f} s); " + ", ".join(f"{k} {v['staging_s']:.1f} s" for k, v in staged["cases"].items()))
+
+
+@main.command()
+@click.argument("case", type=click.Path(path_type=Path))
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Output folder.")
+@click.option("--limits", default=None,
+              help="Per-stage limits (mm, degrees); any subset of mesial=0.25,buccal=0.25,extrusion=0.15,tip=2,torque=1,rotation=2.")
+@click.option("--no-render", is_flag=True, help="Write the chart and poses only; no animation.")
+@click.option("--size", default="640x480", show_default=True, callback=_size, help="Image size WIDTHxHEIGHT.")
+@click.option("--view", "views", multiple=True, help="Camera preset (repeatable). Default: frontal and mandibular_occlusal.")
+@click.option("--frames-per-stage", default=6, show_default=True, type=click.IntRange(1, 120), help="Animation frames per stage.")
+@click.option("--gif", is_flag=True, help="Also write animation.gif.")
+def stage(case: Path, out_dir: Path, limits: str | None, no_render: bool, size, views, frames_per_stage: int, gif: bool) -> None:
+    """Split a case's set-up ([target]) into aligner stages: within per-stage limits, free of contact."""
+    from .runfolder import write_run_record
+    from .staging.chart import summary_line, write_outputs
+    from .staging.commands import plan_case
+    from .staging.limits import StageLimits
+
+    parsed = StageLimits.parse(limits)
+    if not no_render:
+        from render.cameras import check_view
+
+        views = [check_view(v) for v in views or ("frontal", "mandibular_occlusal")]
+    run = plan_case(case, parsed)
+    extra = {"kind": "staging", "stages": run.plan.n_stages, "lower_bound": run.plan.lower_bound,
+             "ipr_total_mm": run.plan.ipr_total_mm, "planning_s": run.plan.planning_s}
+    if not no_render:
+        from render.staging import render_staging
+
+        extra["animation"] = render_staging(run, out_dir, views=views, size=size,
+                                            frames_per_stage=frames_per_stage, gif=gif)
+    write_outputs(run.plan, out_dir, case)
+    write_run_record(out_dir, case, "continuous", extra)  # last: marks the folder finished
+    click.echo(f"{summary_line(run.plan, run.case.name)} -> {out_dir}/staging.csv")
 
 
 @main.command()
@@ -221,52 +264,6 @@ def imgdiff(golden: Path, candidate: Path, diff_path: Path | None, max_level: in
         sys.exit(outcome.exit_code)
 
 
-def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> None:
-    """Simulate the case (orthosim.movement), draw its steps unless --no-render, write
-    out_dir/metrics.json and out_dir/distances.csv.
-
-    When drawing, the simulation runs in a child process (`orthosim.background`) that sends its
-    records through a bounded queue: it computes the next steps while this process draws and
-    encodes, on the other core, instead of taking turns with them for one GIL.
-    """
-    from contextlib import ExitStack
-
-    from .case import load_case
-    from .metrics import occlusion_summary
-    from .movement.report import RunReport
-    from .movement.simulation import MovementModel, simulate, simulate_case
-    from .runfolder import write_run_record
-
-    case = load_case(case_path)
-    detector = detector or case.detector
-    started = time.perf_counter()
-    with ExitStack() as stack:
-        child = None
-        if not render_opts.get("no_render"):
-            from .background import ChildProcessIterator
-
-            # started first: it imports (seconds) while this process builds the model
-            child = stack.enter_context(ChildProcessIterator(ignore_warnings=True,
-                                                             preload=("orthosim.movement.simulation",)))
-        model = MovementModel.build(case)
-        dent, extracted = model.dentition, set(case.extractions)
-        report = RunReport(model, detector)
-        extra: dict = {"model": {"description": dent.description, **dent.info}, "simulated": True}
-        if child is None:
-            for _ in report.collect(simulate(model, detector)):
-                pass
-        else:
-            # the child gets the dentition built here rather than building it again
-            steps = child.submit(simulate_case, case, detector, dentition=dent)
-            extra.update(_render_steps(dent, report.collect(steps), extracted, out_dir, render_opts))
-    extra["occlusion"] = occlusion_summary(dent)  # the initial model's
-    extra["occlusion_final"] = occlusion_summary(dent, {n: report.last.poses[n] for n in dent.fdis})
-    extra["wall_s"] = time.perf_counter() - started
-    metrics = report.write(out_dir, extra)
-    write_run_record(out_dir, case_path, detector, {"wall_s": extra["wall_s"]})  # last: marks the run finished
-    click.echo(f"{case.name} ({detector}): {metrics['steps']} steps, total distance "
-               f"{metrics['total_distance_mm']['initial']:.2f} -> {metrics['total_distance_mm']['final']:.2f} mm, "
-               f"{metrics['collisions']} collisions, max penetration {metrics['max_penetration_mm']:.3f} mm -> {out_dir}/metrics.json")
 def run_options(detector: str | None, opts: dict) -> RunOptions:
     """The RunOptions of the `run` and `demo` command-line options."""
     return RunOptions(detector=detector, render=not opts["no_render"], views=tuple(opts["views"]) or ("frontal",),

@@ -27,6 +27,8 @@ machine does not move the figure; the end-to-end records also give frames / tota
     process (the baseline), and loaded from the cache, in seconds (target: under 10 s to build);
   - startup_s: seconds from launching `orthosim run` to its first simulated step, warm caches
     (`orthosim.startup_bench`, target 2 s), beside a bare interpreter start in the same minute;
+  - staging_s: planning time of `orthosim stage` on each shipped staging case and on a 28-tooth
+    set-up of 30 stages (target: under 10 s; `orthosim.staging.bench`);
   - memory_mb: resident set size before and after a long (default 2,000 frames) update+render
     run: leaked GL programs or buffers would show there.
 Components that are missing are reported as null with a "pending" note, never estimated.
@@ -184,7 +186,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
               frames: int = 300, warmup: int = 30, size=(640, 480), n_markers: int = 2000, memory_frames: int = 2000,
               variant_rounds: int = 4, collision_repeats: int = 20, work_dir: str | Path | None = None,
               png: bool = True, frames_per_step: int = 6, step_days: float | None = 2.0,
-              tree_build: bool = True, startup: bool = True) -> dict:
+              tree_build: bool = True, startup: bool = True, staging: bool = True) -> dict:
     """Measure and return the bench record (see the module docstring and the output contract).
 
     The model is `dentition` when given (then nothing is simulated), else the case's (default:
@@ -231,6 +233,11 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     # First, before any GL context or thread exists: the model's sphere trees built from nothing
     # (a first run on a new machine), over every core and, as the baseline, in one process.
     trees = tree_build_timings(dentition) if tree_build else None
+    staged = None
+    if staging:  # aligner staging planning time
+        from orthosim.staging.bench import staging_timings
+
+        staged = staging_timings()
     synthetic = SyntheticMotion(dentition, n_markers=n_markers)
     n_states = warmup + frames
     states = [synthetic(i) for i in range(n_states)]  # render alone: the same states for every variant
@@ -397,6 +404,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
             "end_to_end": e2e["fps"] >= TARGET_FPS,
             "end_to_end_60": e2e["fps"] >= E2E_TARGET_FPS,
             "spheretree_build": None if trees is None else trees["meets_target"],
+            "staging": None if staged is None else staged["setup_28_teeth"]["staging_s"] < staged["setup_28_teeth"]["target_s"],
             "collision": None if collision is None else {
                 k: (v is not None and 1e6 / v >= TARGET_FPS) for k, v in collision.get("collision_us_per_step", {}).items()},
         },
@@ -411,6 +419,9 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         "spheretree_build": trees,
         "startup_s": None if startup_record is None else startup_record["startup_s"],
         "startup": startup_record,
+        "staging_s": None if staged is None else {**{k: v["staging_s"] for k, v in staged["cases"].items()},
+                                                   "setup_28_teeth": staged["setup_28_teeth"]["staging_s"]},
+        "staging": staged,
         "pending": pending,
         "render_variants": variants,
         "memory_mb": {"start": mem_start, "before_long_run": mem_before_long,
