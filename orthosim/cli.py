@@ -40,6 +40,7 @@ class _LazyGroup(click.Group):
     lazy = {  # name -> (module, attribute, one-line help shown by --help)
         "spheretree": ("orthosim.spheretree.commands", "spheretree", "Build, export and evaluate sphere trees."),
         "collide": ("orthosim.collision.commands", "collide", "Collision accuracy studies, timings and single queries."),
+        "batch": ("orthosim.batch.commands", "batch", "Many runs and parameter sweeps, on every core or a Dask cluster."),
     }
 
     def list_commands(self, ctx):
@@ -162,7 +163,23 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
                    f"loaded in {1000 * trees['load_s']:.0f} ms")
 
 
-def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> None:
+def run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> dict:
+    """One run as `orthosim run` does it, also what each `orthosim batch` worker calls (a
+    module-level function, so it pickles by name to worker processes and Dask workers).
+    Returns the run's metrics and run record, merged."""
+    return _run_case(case_path, out_dir, detector, render_opts)
+
+
+def check_render_options(render_opts: dict) -> None:
+    """Refuse an unknown --view before any work (the camera presets live in render/)."""
+    if not render_opts.get("no_render"):
+        from render.cameras import check_view
+
+        for view in render_opts.get("views") or ():
+            check_view(view)
+
+
+def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> dict:
     """Simulate the case (orthosim.movement), draw its steps unless --no-render, write
     out_dir/metrics.json and out_dir/distances.csv.
 
@@ -183,7 +200,9 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
     started = time.perf_counter()
     with ExitStack() as stack:
         child = None
-        if not render_opts.get("no_render"):
+        # a batch worker simulates on a thread of its own process instead (`simulate_in_process`):
+        # with a worker per core the cores are busy already, and a child per run costs its start-up
+        if not render_opts.get("no_render") and not render_opts.get("simulate_in_process"):
             from .background import ChildProcessIterator
 
             # started first: it imports (seconds) while this process builds the model
@@ -193,9 +212,11 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
         dent, extracted = model.dentition, set(case.extractions)
         report = RunReport(model, detector)
         extra: dict = {"model": {"description": dent.description, **dent.info}, "simulated": True}
-        if child is None:
+        if render_opts.get("no_render"):
             for _ in report.collect(simulate(model, detector)):
                 pass
+        elif child is None:
+            extra.update(_render_steps(dent, report.collect(simulate(model, detector)), extracted, out_dir, render_opts))
         else:
             # the child gets the dentition built here rather than building it again
             steps = child.submit(simulate_case, case, detector, dentition=dent)
@@ -204,10 +225,11 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
     extra["occlusion_final"] = occlusion_summary(dent, {n: report.last.poses[n] for n in dent.fdis})
     extra["wall_s"] = time.perf_counter() - started
     metrics = report.write(out_dir, extra)
-    write_run_record(out_dir, case_path, detector, {"wall_s": extra["wall_s"]})  # last: marks the run finished
+    record = write_run_record(out_dir, case_path, detector, {"wall_s": extra["wall_s"]})  # last: marks the run finished
     click.echo(f"{case.name} ({detector}): {metrics['steps']} steps, total distance "
                f"{metrics['total_distance_mm']['initial']:.2f} -> {metrics['total_distance_mm']['final']:.2f} mm, "
                f"{metrics['collisions']} collisions, max penetration {metrics['max_penetration_mm']:.3f} mm -> {out_dir}/metrics.json")
+    return {**metrics, **record}
 
 
 def _render_steps(dent, records, extracted, out_dir: Path, opts: dict) -> dict:
