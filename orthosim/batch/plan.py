@@ -151,6 +151,8 @@ def set_path(data: dict, key: str, value: Any) -> None:
                 raise KeyError(f"{'.'.join(parts[:depth]) or 'the case'} is a table, not an array: {part} is no key")
             if last:
                 node[part] = value
+            elif part not in node and parts[depth + 1].isdigit():
+                raise KeyError(f"{here}.{parts[depth + 1]}: the case has no {here}")
             else:
                 node = node.setdefault(part, {})
         else:
