@@ -72,3 +72,11 @@ def kill_worker_always(case_path, out_dir, detector, opts):
     if _named(out_dir, opts):
         os.kill(os.getpid(), signal.SIGKILL)
     return _real(case_path, out_dir, detector, opts)
+
+
+def hang_or_crash(case_path, out_dir, detector, opts):
+    """The first named run crashes, the others hang."""
+    names = list(opts.get("fail_runs", ()))
+    if names and Path(out_dir).name == names[0]:
+        return crash(case_path, out_dir, detector, {**opts, "fail_runs": names[:1]})
+    return hang(case_path, out_dir, detector, opts)
