@@ -137,10 +137,11 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--no-png", is_flag=True, help="End to end without writing PNG frames (MP4 only).")
 @click.option("--no-simulate", is_flag=True, help="Skip the movement simulation (end to end on synthetic motion).")
 @click.option("--no-tree-build", is_flag=True, help="Skip timing the sphere-tree build from nothing.")
+@click.option("--no-batch", is_flag=True, help="Skip `orthosim batch` animations per minute with 1 and 2 workers (minutes).")
 @click.option("--step-days", default=2.0, show_default=True, type=click.FloatRange(min=0.01),
               help="Simulation step for the bench, so the case's teeth keep moving through the measured frames.")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
-          no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool) -> None:
+          no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_batch: bool) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -151,7 +152,7 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
 
     record = run_bench(case, frames=frames, warmup=warmup, size=size, n_markers=markers,
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
-                       step_days=step_days, tree_build=not no_tree_build)
+                       step_days=step_days, tree_build=not no_tree_build, batch=not no_batch)
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
@@ -161,6 +162,10 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
         click.echo(f"sphere trees of {trees['teeth']} teeth built in {trees['build_s']:.1f} s on {trees['workers']} cores "
                    f"(target {trees['target_s']:.0f} s; one process {trees['build_s_one_process']:.1f} s), "
                    f"loaded in {1000 * trees['load_s']:.0f} ms")
+    b = record.get("batch")
+    if b:
+        click.echo(f"batch: {b['per_minute_1_worker']:.2f} animations/min with 1 worker, {b['per_minute_2_workers']:.2f} "
+                   f"with 2 (x{b['ratio_2_to_1']:.2f}, target x{b['target_ratio_2_to_1']})")
 
 
 def run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> dict:

@@ -29,6 +29,21 @@ def _death(err) -> str:
     return f"the worker process died (exit code {code})"
 
 
+def _clear_partial(task: RunTask) -> None:
+    """Before a retry: remove what the dead attempt left in its run folder, keeping its case file."""
+    import shutil
+    from pathlib import Path
+
+    case_file = Path(task.case_file)
+    for path in Path(task.out_dir).iterdir():
+        if path == case_file:
+            continue
+        if path.is_dir():
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            path.unlink(missing_ok=True)
+
+
 def run_local(tasks: Sequence[RunTask], run_case: RunCase, workers: int, run_timeout_s: float | None = None,
               retries: int = 1) -> Iterator[tuple[RunOutcome, int]]:
     """Yield (outcome, attempts) for every task as it ends, in the order they end.
@@ -57,6 +72,7 @@ def run_local(tasks: Sequence[RunTask], run_case: RunCase, workers: int, run_tim
                         error = f"stopped after {run_timeout_s:g} s (--run-timeout)"
                     except ProcessExpired as err:
                         if attempt <= retries:
+                            _clear_partial(task)
                             running[pool.schedule(execute, args=(run_case, task), timeout=run_timeout_s)] = (task, attempt + 1)
                             continue
                         error = f"{_death(err)}, {attempt} times"
