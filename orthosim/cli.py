@@ -53,6 +53,7 @@ class _LazyGroup(click.Group):
     lazy = {  # name -> (module, attribute, one-line help shown by --help)
         "spheretree": ("orthosim.spheretree.commands", "spheretree", "Build, export and evaluate sphere trees."),
         "collide": ("orthosim.collision.commands", "collide", "Collision accuracy studies, timings and single queries."),
+        "batch": ("orthosim.batch.commands", "batch", "Many runs and parameter sweeps, on every core or a Dask cluster."),
     }
 
     def list_commands(self, ctx):
@@ -165,11 +166,12 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--no-tree-build", is_flag=True, help="Skip timing the sphere-tree build from nothing.")
 @click.option("--no-startup", is_flag=True, help="Skip timing `orthosim run` from launch to its first step.")
 @click.option("--no-staging", is_flag=True, help="Skip timing the aligner staging planner (shipped staging cases, 28-tooth set-up).")
+@click.option("--no-batch", is_flag=True, help="Skip `orthosim batch` animations per minute with 1 and 2 workers (minutes).")
 @click.option("--step-days", default=2.0, show_default=True, type=click.FloatRange(min=0.01),
               help="Simulation step for the bench, so the case's teeth keep moving through the measured frames.")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
           no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool,
-          no_staging: bool) -> None:
+          no_staging: bool, no_batch: bool) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -181,7 +183,7 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
     record = run_bench(case, frames=frames, warmup=warmup, size=size, n_markers=markers,
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
                        step_days=step_days, tree_build=not no_tree_build, startup=not no_startup,
-                       staging=not no_staging)
+                       staging=not no_staging, batch=not no_batch)
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
@@ -200,6 +202,12 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
         big = staged["setup_28_teeth"]
         click.echo(f"staging: {big['teeth']} teeth, {big['stages']} stages planned in {big['staging_s']:.1f} s "
                    f"(target {big['target_s']:.0f} s); " + ", ".join(f"{k} {v['staging_s']:.1f} s" for k, v in staged["cases"].items()))
+
+    b = record.get("batch")
+    if b:
+        click.echo(f"batch: {b['per_minute_1_worker']:.2f} animations/min with 1 worker, {b['per_minute_2_workers']:.2f} "
+                   f"with 2 (x{b['ratio_2_to_1']:.2f}, target x{b['target_ratio_2_to_1']})")
+
 
 
 @main.command()
@@ -264,14 +272,38 @@ def imgdiff(golden: Path, candidate: Path, diff_path: Path | None, max_level: in
         sys.exit(outcome.exit_code)
 
 
+def run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> dict:
+    """One run as `orthosim run` does it, also what each `orthosim batch` worker calls (a
+    module-level function, so it pickles by name to worker processes and Dask workers).
+    render_opts: the `run` command's options by name (any left out take their defaults), plus
+    `simulate_in_process` (batch workers). Returns the run's metrics and run record, merged."""
+    import json
+
+    _run_case(case_path, out_dir, run_options(detector, render_opts))
+    record = json.loads((Path(out_dir) / "run.json").read_text())
+    return {**json.loads((Path(out_dir) / "metrics.json").read_text()), **record}
+
+
+def check_render_options(render_opts: dict) -> None:
+    """Refuse an unknown --view before any work (the camera presets live in render/)."""
+    if not render_opts.get("no_render"):
+        from render.cameras import check_view
+
+        for view in render_opts.get("views") or ():
+            check_view(view)
+
+
 def run_options(detector: str | None, opts: dict) -> RunOptions:
-    """The RunOptions of the `run` and `demo` command-line options."""
-    return RunOptions(detector=detector, render=not opts["no_render"], views=tuple(opts["views"]) or ("frontal",),
-                      size=opts["size"], gif=opts["gif"], alpha=opts["alpha"], hide_roots=opts["hide_roots"],
-                      contact_faces=opts["contact_faces"], frames_per_step=opts["frames_per_step"],
-                      seconds=opts["seconds"], fps=opts["fps"], split_views=opts["split_views"],
-                      export_scene=opts["export_scene"], export_steps=opts["export_steps"],
-                      verbosity=0 if opts["quiet"] else 2 if opts["verbose"] else 1)
+    """The RunOptions of the `run` and `demo` command-line options (by name; absent ones keep their defaults)."""
+    d = RunOptions()
+    get = opts.get
+    return RunOptions(detector=detector, render=not get("no_render", False), views=tuple(get("views") or ()) or d.views,
+                      size=tuple(get("size", d.size)), gif=get("gif", d.gif), alpha=get("alpha", d.alpha),
+                      hide_roots=get("hide_roots", d.hide_roots), contact_faces=get("contact_faces", d.contact_faces),
+                      frames_per_step=get("frames_per_step"), seconds=get("seconds"), fps=get("fps", d.fps),
+                      split_views=get("split_views", d.split_views), export_scene=get("export_scene"),
+                      export_steps=get("export_steps"), simulate_in_process=get("simulate_in_process", False),
+                      verbosity=0 if get("quiet") else 2 if get("verbose") else 1)
 
 
 def _run_case(case_path: Path, out_dir: Path, options: RunOptions) -> dict:

@@ -65,6 +65,7 @@ class RunOptions:
     split_views: bool = False
     export_scene: str | None = None
     export_steps: tuple[int, ...] | None = None
+    simulate_in_process: bool = False  # batch workers: one per core already, so no simulation child per run
     verbosity: int = 1
 
 
@@ -297,23 +298,27 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
                 pass
             dent = None
         else:
-            from .background import ChildProcessIterator
-
-            child = stack.enter_context(ChildProcessIterator(ignore_warnings=True, preload=("orthosim.run", "orthosim.collision",
-                                                                                              "orthosim.movement.simulation")))
-            dent = None
-            if not case.dentition_is_cached():  # built once, here, and cached for the child
-                t = time.perf_counter()
+            if options.simulate_in_process:
                 dent = case.build_dentition()
-                log.phase("model", time.perf_counter() - t, f"{dent.description}, built and cached")
-            given = dent if dent is not None and not case.dentition_is_cached() else None  # unwritable cache
-            child.submit(simulation_stream, case, options.detector, dentition=given)
-            dent = dent or case.build_dentition()
-            split = _Split(child, log, keep)
+                split, where = _Split(simulation_stream(case, options.detector, dentition=dent), log, keep), "in this process"
+            else:
+                from .background import ChildProcessIterator
+
+                child = stack.enter_context(ChildProcessIterator(ignore_warnings=True, preload=(
+                    "orthosim.run", "orthosim.collision", "orthosim.movement.simulation")))
+                dent = None
+                if not case.dentition_is_cached():  # built once, here, and cached for the child
+                    t = time.perf_counter()
+                    dent = case.build_dentition()
+                    log.phase("model", time.perf_counter() - t, f"{dent.description}, built and cached")
+                given = dent if dent is not None and not case.dentition_is_cached() else None  # unwritable cache
+                child.submit(simulation_stream, case, options.detector, dentition=given)
+                dent = dent or case.build_dentition()
+                split, where = _Split(child, log, keep), "beside the drawing"
             rendered = draw(dent, split, out_dir, options, extracted=frozenset(case.extractions), per_step=per_step,
                             total=n_frames, progress=log.bars_shown)
             log.phase("simulate", time.perf_counter() - split.simulation_started - rendered.get("encode_s", 0.0),
-                      f"{split.steps} steps, {rendered.get('frames', 0)} frames drawn (simulation beside the drawing)")
+                      f"{split.steps} steps, {rendered.get('frames', 0)} frames drawn (simulation {where})")
             if "encode_s" in rendered:
                 log.phase("encode", rendered["encode_s"], ", ".join(Path(p).name for p in rendered.get("outputs", {}).values()))
     if split.result is None:

@@ -186,7 +186,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
               frames: int = 300, warmup: int = 30, size=(640, 480), n_markers: int = 2000, memory_frames: int = 2000,
               variant_rounds: int = 4, collision_repeats: int = 20, work_dir: str | Path | None = None,
               png: bool = True, frames_per_step: int = 6, step_days: float | None = 2.0,
-              tree_build: bool = True, startup: bool = True, staging: bool = True) -> dict:
+              tree_build: bool = True, startup: bool = True, staging: bool = True, batch: bool = False) -> dict:
     """Measure and return the bench record (see the module docstring and the output contract).
 
     The model is `dentition` when given (then nothing is simulated), else the case's (default:
@@ -198,7 +198,8 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     a shipped case with monthly steps comes to rest after about 20 steps, and frames of teeth at
     rest would measure nothing; at 2 days a step, case 1 keeps moving through the measured frames
     (the record's `frames_with_moving_teeth` says how many did). With `tree_build`, the model's
-    sphere trees are also built from nothing (`orthosim.spheretree.bench`, target 10 s).
+    sphere trees are also built from nothing (`orthosim.spheretree.bench`, target 10 s). With
+    `batch`, animations per minute of `orthosim batch` with 1 and 2 workers (`orthosim.batch.bench`).
     """
     import tempfile
 
@@ -238,6 +239,11 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         from orthosim.staging.bench import staging_timings
 
         staged = staging_timings()
+    if batch:  # before this process holds a GL context or threads: the workers get the cores
+        from orthosim.batch.bench import batch_throughput
+        from orthosim.cli import run_case
+
+        batch_record = batch_throughput(run_case, Path(case) if case is not None else DEFAULT_CASE)
     synthetic = SyntheticMotion(dentition, n_markers=n_markers)
     n_states = warmup + frames
     states = [synthetic(i) for i in range(n_states)]  # render alone: the same states for every variant
@@ -422,6 +428,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         "staging_s": None if staged is None else {**{k: v["staging_s"] for k, v in staged["cases"].items()},
                                                    "setup_28_teeth": staged["setup_28_teeth"]["staging_s"]},
         "staging": staged,
+        "batch": batch_record if batch else None,
         "pending": pending,
         "render_variants": variants,
         "memory_mb": {"start": mem_start, "before_long_run": mem_before_long,

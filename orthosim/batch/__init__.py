@@ -1,0 +1,14 @@
+"""Batch rendering: many runs and parameter sweeps, on every core or on a Dask cluster (`orthosim batch`).
+
+`plan` turns cases, detectors and `--set` sweeps into validated variants; `execute` runs them
+into one folder (resumable, one lock, trees built once); `pool` is the local process pool,
+`cluster` the Dask runner, `worker` what either does around one run, `table` the batch.json and
+batch.csv rows, `bench` the animations-per-minute figure. None of it draws: the function that runs
+one case (`orthosim.cli.run_case`, which renders) is handed in by the composition root.
+"""
+
+from .execute import BatchOptions, run_batch
+from .plan import BatchError, Sweep, Variant, parse_sweep, plan_batch
+from .table import RunRow
+
+__all__ = ["BatchError", "BatchOptions", "RunRow", "Sweep", "Variant", "parse_sweep", "plan_batch", "run_batch"]

@@ -1,0 +1,82 @@
+"""Run functions that `tests/test_batch_runs.py` hands to batch workers in place of `orthosim.cli.run_case`:
+module-level, so that they pickle by name to worker processes and Dask workers. Each misbehaves
+for the runs named in its options (`fail_runs`), so one batch can hold good and bad runs."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from pathlib import Path
+
+SMALL_CASE = """\
+[case]
+name = "small"
+
+[model]
+kind = "parametric"
+resolution = "coarse"
+
+[treatment]
+extractions = [14, 24]
+duration_days = 4
+step_days = 2
+detector = "discrete"
+
+[[loads]]
+teeth = [16, 26]
+force_cN = 150
+direction = "mesial"
+"""
+
+RENDER = {"size": (48, 32), "frames_per_step": 1, "views": ("frontal",), "simulate_in_process": True}
+
+
+def _real(case_path, out_dir, detector, opts):
+    from orthosim.cli import run_case
+
+    return run_case(case_path, out_dir, detector, {k: v for k, v in opts.items() if k not in ("fail_runs", "marker")})
+
+
+def _named(out_dir, opts) -> bool:
+    return Path(out_dir).name in opts.get("fail_runs", ())
+
+
+def crash(case_path, out_dir, detector, opts):
+    """A bug: raises half way through the named runs (after writing a frame-like file)."""
+    if _named(out_dir, opts):
+        Path(out_dir, "frames").mkdir(parents=True, exist_ok=True)
+        raise RuntimeError("simulated crash in the renderer")
+    return _real(case_path, out_dir, detector, opts)
+
+
+def hang(case_path, out_dir, detector, opts):
+    """Never ends for the named runs (until the batch's --run-timeout stops it)."""
+    if _named(out_dir, opts):
+        time.sleep(3600)
+    return _real(case_path, out_dir, detector, opts)
+
+
+def kill_worker_once(case_path, out_dir, detector, opts):
+    """The named run's first attempt kills its own worker process (SIGKILL) part-way through."""
+    marker = Path(opts["marker"]) / Path(out_dir).name
+    if _named(out_dir, opts) and not marker.exists():
+        marker.parent.mkdir(parents=True, exist_ok=True)
+        marker.write_text(str(os.getpid()))
+        Path(out_dir, "partial.tmp").write_text("half")
+        os.kill(os.getpid(), signal.SIGKILL)
+    return _real(case_path, out_dir, detector, opts)
+
+
+def kill_worker_always(case_path, out_dir, detector, opts):
+    if _named(out_dir, opts):
+        os.kill(os.getpid(), signal.SIGKILL)
+    return _real(case_path, out_dir, detector, opts)
+
+
+def hang_or_crash(case_path, out_dir, detector, opts):
+    """The first named run crashes, the others hang."""
+    names = list(opts.get("fail_runs", ()))
+    if names and Path(out_dir).name == names[0]:
+        return crash(case_path, out_dir, detector, {**opts, "fail_runs": names[:1]})
+    return hang(case_path, out_dir, detector, opts)

@@ -1,0 +1,227 @@
+"""Running batches: failure isolation, resume after a kill, a Dask cluster equal to the local pool,
+and sphere trees built safely when two processes need the same one at once.
+
+The runs are small (coarse teeth, two steps, 48x32 frames); the run function is `orthosim.cli.run_case`,
+or a wrapper from `batch_helpers` that crashes, hangs or kills its worker for chosen runs.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import batch_helpers as H
+from orthosim.batch import BatchOptions, parse_sweep, plan_batch, run_batch
+from orthosim.runfolder import read_finished_run
+
+ROOT = Path(__file__).resolve().parent.parent
+FORCES = "loads.0.force_cN=100,150,200"
+# what a run may legitimately vary in from one process to another: timings and where it ran
+VOLATILE = {"wall_s", "fps", "render_fps", "case_file", "outputs"}
+
+
+@pytest.fixture(scope="module")
+def case_file(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("cases") / "small.toml"
+    path.write_text(H.SMALL_CASE)
+    return path
+
+
+def variants(case_file, sweep=FORCES):
+    return plan_batch([case_file], sweeps=[parse_sweep(sweep)])
+
+
+def ids(vs):
+    return [v.run_id for v in vs]
+
+
+def stable_metrics(run_dir: Path) -> dict:
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    return {k: v for k, v in metrics.items() if k not in VOLATILE}
+
+
+def leftovers(folder: Path) -> list[Path]:
+    """Temporary files an atomic write leaves when interrupted (.name.XXXX), other than the lock."""
+    return [p for p in folder.rglob(".*") if p.name != ".batch.lock"]
+
+
+@pytest.fixture(scope="module")
+def local_batch(case_file, tmp_path_factory):
+    """Three runs on two local worker processes, rendered: the reference for the other tests."""
+    out = tmp_path_factory.mktemp("local")
+    vs = variants(case_file)
+    rows = run_batch(vs, out, H._real, BatchOptions(workers=2, render_opts=H.RENDER, progress=False), ["loads.0.force_cN"])
+    return out, vs, rows
+
+
+def test_every_run_writes_a_finished_run_folder_and_a_row(local_batch):
+    out, vs, rows = local_batch
+    assert [r.status for r in rows] == ["ok"] * 3
+    table = json.loads((out / "batch.json").read_text())
+    assert table["runs_ok"] == 3 and table["runs_failed"] == 0
+    csv = (out / "batch.csv").read_text().splitlines()
+    assert csv[0].startswith("run_id,case,detector,loads.0.force_cN,status,error")
+    assert len(csv) == 4
+    for v, row in zip(vs, rows):
+        record = read_finished_run(out / v.run_id)
+        assert record["case_sha256"] == v.case_sha256  # case.toml is the exact case that ran
+        assert (out / v.run_id / "case.toml").read_text() == v.case_text
+        assert (out / v.run_id / "animation.mp4").stat().st_size > 0
+        metrics = json.loads((out / v.run_id / "metrics.json").read_text())
+        assert row.steps == metrics["steps"] == 2
+        assert row.total_distance_final_mm == metrics["total_distance_mm"]["final"]
+        assert row.frames == 3
+    # a bigger force moves the molars further in the same time
+    finals = [r.total_distance_final_mm for r in rows]
+    assert finals[0] > finals[1] > finals[2]
+    assert leftovers(out) == []
+
+
+def test_a_second_invocation_reuses_finished_runs_and_runs_nothing(local_batch):
+    out, vs, _ = local_batch
+    before = {v.run_id: (out / v.run_id / "run.json").stat().st_mtime_ns for v in vs}
+    rows = run_batch(vs, out, H.crash, BatchOptions(workers=2, render_opts={**H.RENDER, "fail_runs": ids(vs)},
+                                                    progress=False))
+    assert all(r.status == "ok" and r.reused for r in rows)  # the crashing function never ran
+    assert before == {v.run_id: (out / v.run_id / "run.json").stat().st_mtime_ns for v in vs}
+
+
+def test_failing_runs_are_recorded_and_the_batch_goes_on(case_file, tmp_path):
+    vs = variants(case_file, "loads.0.force_cN=100,150,200,250")
+    crashing, hanging = vs[0].run_id, vs[2].run_id
+    # the limit leaves a good run (imports, model, frames) room even on a heavily loaded machine
+    opts = BatchOptions(workers=2, run_timeout_s=240, render_opts={**H.RENDER, "fail_runs": [crashing, hanging]},
+                        progress=False)
+    rows = {r.run_id: r for r in run_batch(vs, tmp_path, H.hang_or_crash, opts)}
+    assert rows[crashing].status == "failed" and rows[crashing].error == "RuntimeError: simulated crash in the renderer"
+    assert rows[hanging].status == "failed" and rows[hanging].error == "stopped after 240 s (--run-timeout)"
+    for ok in (vs[1].run_id, vs[3].run_id):
+        assert rows[ok].status == "ok", rows[ok].error
+        read_finished_run(tmp_path / ok)
+    assert "Traceback" in (tmp_path / "logs" / f"{crashing}.log").read_text()
+    table = json.loads((tmp_path / "batch.json").read_text())
+    assert (table["runs_ok"], table["runs_failed"]) == (2, 2)
+    # the same command again runs the two failed ones only
+    rows = {r.run_id: r for r in run_batch(vs, tmp_path, H._real, BatchOptions(workers=2, render_opts=H.RENDER,
+                                                                                progress=False))}
+    assert all(r.status == "ok" for r in rows.values())
+    assert [r.reused for r in rows.values()] == [False, True, False, True]
+
+
+def test_a_killed_worker_costs_its_run_one_retry_or_is_recorded(case_file, tmp_path):
+    vs = variants(case_file, "loads.0.force_cN=100,150")
+    opts = {**H.RENDER, "fail_runs": [vs[0].run_id], "marker": str(tmp_path / "markers")}
+    rows = run_batch(vs, tmp_path / "retried", H.kill_worker_once, BatchOptions(workers=2, render_opts=opts, progress=False))
+    assert [(r.status, r.attempts) for r in rows] == [("ok", 2), ("ok", 1)]
+    assert not (tmp_path / "retried" / vs[0].run_id / "partial.tmp").exists()  # the retry started from a clean folder
+    rows = run_batch(vs, tmp_path / "given_up", H.kill_worker_always,
+                     BatchOptions(workers=2, retries=0, render_opts=opts, progress=False))
+    assert rows[0].status == "failed" and rows[0].error == "the worker process died (signal SIGKILL), 1 times"
+    assert rows[1].status == "ok"
+
+
+def test_the_command_exits_1_when_a_run_fails_and_0_when_all_succeed(case_file, tmp_path):
+    args = [sys.executable, "-c", "from orthosim.cli import entry; entry()", "batch", str(case_file), "--out",
+            str(tmp_path), "--size", "48x32", "--frames-per-step", "1", "--workers", "1"]
+    env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa"}
+    failed = subprocess.run(args + ["--run-timeout", "0.01"], capture_output=True, text=True, env=env, timeout=600)
+    assert failed.returncode == 1, failed.stderr
+    assert "stopped after 0.01 s (--run-timeout)" in failed.stderr
+    done = subprocess.run(args, capture_output=True, text=True, env=env, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert "batch: 1 runs, 1 ok, 0 failed" in done.stdout
+
+
+def test_a_batch_killed_mid_run_resumes_without_redoing_finished_runs(case_file, tmp_path):
+    out = tmp_path / "out"
+    args = [sys.executable, "-c", "from orthosim.cli import entry; entry()", "batch", str(case_file), "--out", str(out),
+            "--set", FORCES, "--size", "48x32", "--frames-per-step", "1", "--workers", "1"]
+    env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa"}
+    vs = variants(case_file)
+    first = out / vs[0].run_id / "run.json"
+    proc = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 600
+        while not first.exists() and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+        assert first.exists(), "the first run never finished"
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)  # the batch and its workers, mid-way through the second run
+        proc.wait()
+    finished_at = first.stat().st_mtime_ns
+    assert not (out / vs[2].run_id / "run.json").exists()
+    done = subprocess.run(args, capture_output=True, text=True, env=env, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert "batch: 3 runs, 3 ok (1 from an earlier run), 0 failed" in done.stdout
+    assert first.stat().st_mtime_ns == finished_at
+    for v in vs:
+        read_finished_run(out / v.run_id)
+    assert leftovers(out) == []
+
+
+def test_a_dask_cluster_gives_the_local_pools_results_and_survives_a_killed_worker(local_batch, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    ref_out, vs, ref_rows = local_batch
+    opts = {**H.RENDER, "fail_runs": [vs[1].run_id], "marker": str(tmp_path / "markers")}
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None, silence_logs=True) as cluster:
+        rows = run_batch(vs, tmp_path / "dask", H.kill_worker_once,
+                         BatchOptions(scheduler=cluster.scheduler_address, render_opts=opts, progress=False))
+    assert (tmp_path / "markers" / vs[1].run_id).exists()  # a worker did die mid-run
+    assert [r.status for r in rows] == ["ok"] * 3
+    for v in vs:
+        ref, got = ref_out / v.run_id, tmp_path / "dask" / v.run_id
+        assert read_finished_run(got)["case_file"] == str(got / "case.toml")
+        assert not (got / "partial.tmp").exists()
+        assert stable_metrics(got) == stable_metrics(ref)  # bit for bit: floats compared exactly
+        frames = sorted((ref / "frames").glob("*.png"))
+        assert frames and [f.read_bytes() for f in frames] == [(got / "frames" / f.name).read_bytes() for f in frames]
+    assert [r.total_distance_final_mm for r in rows] == [r.total_distance_final_mm for r in ref_rows]
+
+
+def _build_tree(args):
+    cache_dir, barrier = args
+    import trimesh
+
+    from orthosim.spheretree import cached_sphere_tree
+
+    mesh = trimesh.creation.icosphere(subdivisions=2, radius=5.0)
+    barrier.wait()  # both processes ask for the same missing tree at the same moment
+    tree = cached_sphere_tree(mesh, cache_dir=cache_dir)
+    return [c.tolist() for c in tree.centers], [r.tolist() for r in tree.radii]
+
+
+def test_two_processes_building_the_same_tree_at_once_leave_one_whole_cache_entry(tmp_path):
+    import trimesh
+
+    from orthosim.spheretree import cached_sphere_tree
+
+    ctx = multiprocessing.get_context("spawn")
+    barrier = ctx.Manager().Barrier(2)
+    with ctx.Pool(2) as pool:
+        a, b = pool.map(_build_tree, [(str(tmp_path), barrier)] * 2)
+    entries = list(tmp_path.iterdir())
+    assert len(entries) == 1 and entries[0].suffix == ".npz"  # one entry, no temporary file left
+    stored = cached_sphere_tree(trimesh.creation.icosphere(subdivisions=2, radius=5.0), cache_dir=tmp_path)  # a hit
+    assert a == b == ([c.tolist() for c in stored.centers], [r.tolist() for r in stored.radii])
+    assert list(tmp_path.iterdir()) == entries
+
+
+def test_the_batch_builds_each_models_trees_before_its_workers_start(case_file, tmp_path, monkeypatch):
+    from orthosim.batch import execute
+
+    built = []
+    monkeypatch.setattr(execute, "prebuild_trees", lambda files: built.extend(files))
+    vs = variants(case_file) + plan_batch([case_file], sweeps=[parse_sweep("model.resolution=medium")])
+    run_batch(vs, tmp_path, H.crash, BatchOptions(workers=1, render_opts={"fail_runs": ids(vs)}, progress=False))
+    # one case file per distinct model (three coarse variants share one), each written before the build
+    assert [p.parent.name for p in built] == [vs[0].run_id, vs[3].run_id]
