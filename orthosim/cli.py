@@ -279,9 +279,11 @@ def run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: 
     `simulate_in_process` (batch workers). Returns the run's metrics and run record, merged."""
     import json
 
+    started = time.perf_counter()
     _run_case(case_path, out_dir, run_options(detector, render_opts))
     record = json.loads((Path(out_dir) / "run.json").read_text())
-    return {**json.loads((Path(out_dir) / "metrics.json").read_text()), **record}
+    # a batch worker outlives its runs: the run's own wall time, not the process's age
+    return {**json.loads((Path(out_dir) / "metrics.json").read_text()), **record, "wall_s": time.perf_counter() - started}
 
 
 def check_render_options(render_opts: dict) -> None:

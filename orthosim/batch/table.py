@@ -69,7 +69,11 @@ def run_summary(summary: dict) -> dict:
     """The part of a run's metrics the batch keeps (what crosses a process or network boundary)."""
     keep = ("steps", "collisions", "max_penetration_mm", "total_distance_mm", "frames", "fps", "wall_s", "case",
             "detector")
-    return {k: summary[k] for k in keep if k in summary}
+    # run.json keeps the drawing's figures under "render" and the run's wall time under "timings_s"
+    drawn = summary.get("render") or {}
+    found = {"frames": drawn.get("frames"), "fps": drawn.get("fps"),
+             "wall_s": (summary.get("timings_s") or {}).get("total"), **summary}
+    return {k: found[k] for k in keep if k in found}
 
 
 def finished_summary(run_dir: Path, variant: Variant) -> dict | None:
