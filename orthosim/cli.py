@@ -30,6 +30,13 @@ def _size(ctx, param, value: str) -> tuple[int, int]:
     return w, h
 
 
+def _views(ctx, param, value: tuple[str, ...]) -> tuple[str, ...]:
+    """Camera presets checked while the options are read: a bad --view stops before any work."""
+    from render.cameras import check_view  # numpy only, no OpenGL
+
+    return tuple(check_view(v) for v in value)
+
+
 class _LazyGroup(click.Group):
     """A command group whose heavier subgroups are imported only when they run.
 
@@ -76,7 +83,7 @@ def render_options(f):
     """Options shared by the commands that draw frames."""
     f = click.option("--no-render", is_flag=True, help="Run the simulation alone; write no images.")(f)
     f = click.option("--size", default="640x480", show_default=True, callback=_size, help="Image size WIDTHxHEIGHT.")(f)
-    f = click.option("--view", "views", multiple=True,
+    f = click.option("--view", "views", multiple=True, callback=_views,
                      help="Camera preset (repeatable): frontal, right_buccal, left_buccal, maxillary, mandibular. Default: frontal.")(f)
     f = click.option("--gif", is_flag=True, help="Also write animation.gif.")(f)
     f = click.option("--alpha", is_flag=True, help="PNG frames with a transparent background.")(f)
@@ -170,6 +177,19 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
     records through a bounded queue: it computes the next steps while this process draws and
     encodes, on the other core, instead of taking turns with them for one GIL.
     """
+    from .outputfolder import output_folder
+
+    # out_dir is checked and locked now; the run is written into a private staging folder that
+    # replaces it whole at the end, so a failed or stopped run leaves it as it was
+    with output_folder(out_dir) as staging:
+        metrics, case = _run_case_into(case_path, staging, detector, render_opts)
+    click.echo(f"{case.name} ({metrics['detector']}): {metrics['steps']} steps, total distance "
+               f"{metrics['total_distance_mm']['initial']:.2f} -> {metrics['total_distance_mm']['final']:.2f} mm, "
+               f"{metrics['collisions']} collisions, max penetration {metrics['max_penetration_mm']:.3f} mm -> {out_dir}/metrics.json")
+
+
+def _run_case_into(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict):
+    """The body of `_run_case`, writing into `out_dir` (the staging folder); returns (metrics, case)."""
     from contextlib import ExitStack
 
     from .case import load_case
@@ -205,9 +225,7 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
     extra["wall_s"] = time.perf_counter() - started
     metrics = report.write(out_dir, extra)
     write_run_record(out_dir, case_path, detector, {"wall_s": extra["wall_s"]})  # last: marks the run finished
-    click.echo(f"{case.name} ({detector}): {metrics['steps']} steps, total distance "
-               f"{metrics['total_distance_mm']['initial']:.2f} -> {metrics['total_distance_mm']['final']:.2f} mm, "
-               f"{metrics['collisions']} collisions, max penetration {metrics['max_penetration_mm']:.3f} mm -> {out_dir}/metrics.json")
+    return metrics, case
 
 
 def _render_steps(dent, records, extracted, out_dir: Path, opts: dict) -> dict:
@@ -232,21 +250,29 @@ def entry() -> None:
     """Console-script entry: run the CLI, turning user errors into one line and an exit code."""
     import warnings
 
+    from .lifeline import sigterm_as_interrupt, terminated
+
     warnings.showwarning = _one_line_warning
+    sigterm_as_interrupt()
     try:
-        main.main(standalone_mode=False)
+        try:
+            main.main(standalone_mode=False)
+        except Exception as err:  # whatever a SIGTERM interrupted ends as the stop it was
+            if terminated() and not isinstance(err, OrthosimError):
+                raise KeyboardInterrupt from None
+            raise
     except OrthosimError as err:
         click.echo(f"orthosim: error: {err}", err=True)
         sys.exit(err.exit_code)
     except click.exceptions.Abort:
-        click.echo("orthosim: aborted", err=True)
-        sys.exit(130)
+        click.echo("orthosim: terminated" if terminated() else "orthosim: aborted", err=True)
+        sys.exit(143 if terminated() else 130)
     except click.ClickException as err:
         err.show()
         sys.exit(err.exit_code)
     except KeyboardInterrupt:
-        click.echo("orthosim: interrupted", err=True)
-        sys.exit(130)
+        click.echo("orthosim: terminated" if terminated() else "orthosim: interrupted", err=True)
+        sys.exit(143 if terminated() else 130)
     except BrokenPipeError:
         sys.exit(1)
     except SystemExit:

@@ -347,5 +347,6 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
         "views": list(views),
         "size": list(size),
         "gl_renderer": gl_renderer,
-        "outputs": {k: v for k, v in written.items() if k != "frames"},
+        # relative to out_dir: a run folder may be written in a staging place and moved (orthosim.outputfolder)
+        "outputs": {k: os.path.relpath(v, out_dir) for k, v in written.items() if k != "frames"},
     }

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_path
+from ..lifeline import exit_with_parent
 from .build import build_sphere_tree, check_request, mesh_arrays
 from .tree import SphereTree
 
@@ -168,7 +169,9 @@ def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int = 
             yield from ((e, _build(job)) for job, e in zip(jobs, waiting))
             return
         # fork: the children start at once with the parent's imports and compiled kernels
-        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as pool:
+        # each worker ends with this process if it is killed outright (orthosim.lifeline)
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                                 initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
             futures = {pool.submit(_build, job): e for job, e in zip(jobs, waiting)}
             for done in as_completed(futures):
                 yield futures[done], done.result()
