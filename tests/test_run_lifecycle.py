@@ -79,7 +79,11 @@ def _start_rendered_run(case: Path, out: Path) -> subprocess.Popen:
 
 def _wait_for_frames(proc: subprocess.Popen, parent: Path, n: int = 3) -> None:
     deadline = time.monotonic() + 300
-    while len(list(parent.glob(".*.orthosim-staging-*/frames/*.png"))) < n:
+    def drawn():  # into a staging folder beside the output (orthosim.outputfolder); before it, into the output
+        return len([*parent.glob(".*.orthosim-staging-*/frames/*.png"), *parent.glob("*/frames/*.png")])
+
+    n += drawn()  # an earlier run's frames
+    while drawn() < n:
         assert proc.poll() is None, proc.communicate()[1]
         assert time.monotonic() < deadline, "the run drew no frames"
         time.sleep(0.05)
