@@ -183,9 +183,13 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
     # replaces it whole at the end, so a failed or stopped run leaves it as it was
     with output_folder(out_dir) as staging:
         metrics, case = _run_case_into(case_path, staging, detector, render_opts)
+    start = metrics.get("initial_interpenetration") or []
+    initial = (f" beyond the {start[0]['mm']:.3f} mm the model starts with (teeth {start[0]['pair'][0]}-{start[0]['pair'][1]}"
+               f"{f' and {len(start) - 1} more pairs' if len(start) > 1 else ''})" if start else "")
     click.echo(f"{case.name} ({metrics['detector']}): {metrics['steps']} steps, total distance "
                f"{metrics['total_distance_mm']['initial']:.2f} -> {metrics['total_distance_mm']['final']:.2f} mm, "
-               f"{metrics['collisions']} collisions, max penetration {metrics['max_penetration_mm']:.3f} mm -> {out_dir}/metrics.json")
+               f"{metrics['collisions']} collisions, max penetration {metrics['max_penetration_mm']:.3f} mm{initial} "
+               f"-> {out_dir}/metrics.json")
 
 
 def _run_case_into(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict):
@@ -194,7 +198,7 @@ def _run_case_into(case_path: Path, out_dir: Path, detector: str | None, render_
 
     from .case import load_case
     from .metrics import occlusion_summary
-    from .movement.report import RunReport
+    from .movement.report import STEPS_FILE, RunReport
     from .movement.simulation import MovementModel, simulate, simulate_case
     from .runfolder import write_run_record
 
@@ -211,7 +215,7 @@ def _run_case_into(case_path: Path, out_dir: Path, detector: str | None, render_
                                                              preload=("orthosim.movement.simulation",)))
         model = MovementModel.build(case)
         dent, extracted = model.dentition, set(case.extractions)
-        report = RunReport(model, detector)
+        report = RunReport(model, detector, steps_file=out_dir / STEPS_FILE)  # per-step detail streamed
         extra: dict = {"model": {"description": dent.description, **dent.info}, "simulated": True}
         if child is None:
             for _ in report.collect(simulate(model, detector)):
