@@ -100,3 +100,21 @@ def test_loaded_teeth_report_their_centre_of_resistance_and_movement(run):
     assert t16["movement"] == "translation"
     assert t16["moment_to_force_mm"] == pytest.approx(model.mechanics[16].bracket_lever_mm)  # the wire's counter-moment
     assert np.allclose(t16["center_of_resistance_local_mm"], model.mechanics[16].center_of_resistance)
+
+
+def test_memory_stays_flat_in_the_number_of_steps_as_per_step_detail_streams_to_disk(run, tmp_path):
+    import tracemalloc
+
+    model, records, _ = run
+    report = RunReport(model, "discrete", steps_file=tmp_path / "steps.jsonl")
+    for rec in records:
+        report.add(rec)
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    for _ in range(3000):  # a long run's worth of steps
+        report.add(records[-1])
+    grown = tracemalloc.get_traced_memory()[0] - before
+    tracemalloc.stop()
+    assert grown < 1_000_000, f"{grown / 1e6:.1f} MB kept for 3,000 steps"  # was ~10 kB a step kept in a list
+    report.write(tmp_path)
+    assert sum(1 for _ in read_steps(tmp_path)) == len(records) + 3000
