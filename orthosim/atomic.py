@@ -45,7 +45,7 @@ def write_bytes(target: str | Path, data: bytes) -> None:
         tmp.write_bytes(data)
 
 
-def _to_jsonable(obj: Any) -> Any:
+def to_jsonable(obj: Any) -> Any:
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     if isinstance(obj, np.generic):
@@ -56,4 +56,4 @@ def _to_jsonable(obj: Any) -> Any:
 
 
 def write_json(target: str | Path, data: Any) -> None:
-    write_text(target, json.dumps(data, indent=2, default=_to_jsonable) + "\n")
+    write_text(target, json.dumps(data, indent=2, default=to_jsonable) + "\n")

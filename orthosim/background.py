@@ -25,6 +25,7 @@ same message (an `OrthosimError` stays one, and the CLI prints it as one line); 
 without a word (killed, crashed) is reported as a `ChildProcessError`. Shutdown: leaving the `with`
 block, `close()`, or exhausting the iterator stops the child and waits for it, so no process is
 left behind; Ctrl-C is left to this process (the child ignores SIGINT and is stopped by `close`).
+If this process is killed outright, the child ends with it (`orthosim.lifeline.exit_with_parent`).
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ import signal
 import threading
 import warnings
 from typing import Any, Callable, Iterable, Sequence
+
+from .lifeline import exit_with_parent
 
 _ITEM, _END, _ERROR = "item", "end", "error"
 _POLL_S = 0.1  # how often a waiting side checks whether the other has gone
@@ -61,7 +64,8 @@ class ChildProcessIterator:
         self._done = False
         self._sender: threading.Thread | None = None
         work_in, self._work = ctx.Pipe(duplex=False)
-        self._process = ctx.Process(target=_produce, args=(work_in, self._queue, self._stop, ignore_warnings, tuple(preload)),
+        self._process = ctx.Process(target=_produce, args=(work_in, self._queue, self._stop, ignore_warnings, tuple(preload),
+                                                                 os.getpid()),
                                     name=name, daemon=True)
         # Ctrl-C reaches every process of the terminal's foreground group; the child starts with
         # SIGINT ignored (an ignored signal stays ignored across exec) and this process stops it.
@@ -186,8 +190,9 @@ def _portable(exc: BaseException) -> bytes:
         return pickle.dumps(RuntimeError(f"{type(exc).__name__}: {exc}"))
 
 
-def _produce(work, q, stop, ignore_warnings: bool, preload: tuple[str, ...]) -> None:
+def _produce(work, q, stop, ignore_warnings: bool, preload: tuple[str, ...], parent_pid: int) -> None:
     """The child: import, wait for the work, run the factory, send its items, then the end or the error."""
+    exit_with_parent(parent_pid)  # a parent killed outright cannot stop us: end with it
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if ignore_warnings:
         warnings.simplefilter("ignore")

@@ -121,7 +121,8 @@ class Case:
             return dent
         from .dentition_cache import cached_dentition
 
-        return cached_dentition(*self._mesh_model_key(), build=self._load_meshes)
+        parameters, input_files = self._mesh_model_key()
+        return cached_dentition(parameters, self._load_meshes, input_files)
 
     def _mesh_model_key(self) -> tuple[dict, list[Path]]:
         """(parameters, input files) that decide a mesh model: the dentition cache's key."""

@@ -43,6 +43,13 @@ def _steps(ctx, param, value: str | None) -> tuple[int, ...] | None:
     return steps
 
 
+def _views(ctx, param, value: tuple[str, ...]) -> tuple[str, ...]:
+    """Camera presets checked while the options are read: a bad --view stops before any work."""
+    from render.cameras import check_view  # numpy only, no OpenGL
+
+    return tuple(check_view(v) for v in value)
+
+
 class _LazyGroup(click.Group):
     """A command group whose heavier subgroups are imported only when they run.
 
@@ -90,7 +97,7 @@ def render_options(f):
     """Options shared by the commands that draw frames."""
     f = click.option("--no-render", is_flag=True, help="Run the simulation alone; write no images.")(f)
     f = click.option("--size", default="640x480", show_default=True, callback=_size, help="Image size WIDTHxHEIGHT.")(f)
-    f = click.option("--view", "views", multiple=True,
+    f = click.option("--view", "views", multiple=True, callback=_views,
                      help="Camera preset (repeatable): frontal, right_buccal, left_buccal, maxillary_occlusal, "
                           "mandibular_occlusal. Default: frontal.")(f)
     f = click.option("--gif", is_flag=True, help="Also write animation.gif (at the frame's size).")(f)
@@ -317,7 +324,17 @@ def _run_case(case_path: Path, out_dir: Path, options: RunOptions) -> dict:
 
         return check_view(name)
 
-    return run_case(case_path, out_dir, options, draw=_render_steps, check_view=check_view)
+    from .outputfolder import output_folder
+
+    # out_dir is checked and locked now, before any work; the run is written into a private
+    # staging folder that replaces it whole at the end, so a failed or stopped run leaves it as it was
+    lines: list[str] = []
+    with output_folder(out_dir) as staging:
+        record = run_case(case_path, staging, options, draw=_render_steps, check_view=check_view,
+                          shown_dir=out_dir, summary_to=lines.append)
+    for line in lines:  # after the swap: the summary names files that are there
+        click.echo(line)
+    return record
 
 
 def _render_steps(dent, records, out_dir: Path, options: RunOptions, *, extracted: frozenset[int], per_step: int,
@@ -342,21 +359,29 @@ def entry() -> None:
     """Console-script entry: run the CLI, turning user errors into one line and an exit code."""
     import warnings
 
+    from .lifeline import sigterm_as_interrupt, terminated
+
     warnings.showwarning = _one_line_warning
+    sigterm_as_interrupt()
     try:
-        main.main(standalone_mode=False)
+        try:
+            main.main(standalone_mode=False)
+        except Exception as err:  # whatever a SIGTERM interrupted ends as the stop it was
+            if terminated() and not isinstance(err, OrthosimError):
+                raise KeyboardInterrupt from None
+            raise
     except OrthosimError as err:
         click.echo(f"orthosim: error: {err}", err=True)
         sys.exit(err.exit_code)
     except click.exceptions.Abort:
-        click.echo("orthosim: aborted", err=True)
-        sys.exit(130)
+        click.echo("orthosim: terminated" if terminated() else "orthosim: aborted", err=True)
+        sys.exit(143 if terminated() else 130)
     except click.ClickException as err:
         err.show()
         sys.exit(err.exit_code)
     except KeyboardInterrupt:
-        click.echo("orthosim: interrupted", err=True)
-        sys.exit(130)
+        click.echo("orthosim: terminated" if terminated() else "orthosim: interrupted", err=True)
+        sys.exit(143 if terminated() else 130)
     except BrokenPipeError:
         sys.exit(1)
     except SystemExit:

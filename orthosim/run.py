@@ -84,7 +84,6 @@ class RunResult:
 
     metrics: dict
     distances_csv: str
-    distances_per_step_csv: str
     model_files: dict  # for run.json: the model's description and source files
 
 
@@ -182,12 +181,13 @@ def frames_per_step(options: RunOptions, steps: int) -> int:
 # ------------------------------------------------------------------------- 2-4. model, trees, simulate
 
 
-def simulation_stream(case, detector: str, dentition=None) -> Iterator:
+def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None) -> Iterator:
     """The simulation side of a run: PhaseDone("model"), PhaseDone("trees"), one StepRecord per step,
-    then the RunResult. Picklable arguments: it runs in the child process when the run draws."""
+    then the RunResult. Picklable arguments: it runs in the child process when the run draws.
+    The per-step detail (steps.jsonl, distances_per_step.csv) streams into out_dir as it comes."""
     from .collision import CollisionModel
     from .metrics import occlusion_summary
-    from .movement.report import RunReport
+    from .movement.report import DISTANCES_PER_STEP_FILE, STEPS_FILE, RunReport
     from .movement.simulation import MovementModel, simulate
 
     t0 = time.perf_counter()
@@ -205,13 +205,15 @@ def simulation_stream(case, detector: str, dentition=None) -> Iterator:
     how = "from the cache" if cached else ("given" if dentition is not None else "built")
     yield PhaseDone("model", (t1 - t0) + (t3 - t2), f"{dent.description}, {how}")
     yield PhaseDone("trees", t2 - t1, f"{len(collision.bodies)} sphere trees and exact-mesh BVHs")
-    report = RunReport(model, detector)
+    out_dir = Path(out_dir)
+    report = RunReport(model, detector, steps_file=out_dir / STEPS_FILE, distances_file=out_dir / DISTANCES_PER_STEP_FILE)
     yield from report.collect(simulate(model, detector))
+    report.finish_streams(out_dir)
     metrics = report.metrics()
     metrics["model"] = model_summary(dent)
     metrics["occlusion"] = occlusion_summary(dent)  # the initial model's
     metrics["occlusion_final"] = occlusion_summary(dent, {n: report.last.poses[n] for n in dent.fdis})
-    yield RunResult(metrics, report.distances_csv(), report.distances_per_step_csv(), model_files(dent))
+    yield RunResult(metrics, report.distances_csv(), model_files(dent))
 
 
 _PATH_KEYS = ("source", "files", "axes_file")  # model info that names files on this machine: run.json's
@@ -259,12 +261,17 @@ class _Split:
 
 
 def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = RunOptions(),
-             draw: Callable | None = None, check_view: Callable[[str], str] | None = None) -> dict:
+             draw: Callable | None = None, check_view: Callable[[str], str] | None = None,
+             shown_dir: str | Path | None = None, summary_to: Callable[[str], None] | None = None) -> dict:
     """Run one case into out_dir (see the module doc); returns the run record (run.json).
 
     draw(dentition, records, out_dir, options, *, extracted, per_step, total, progress) -> dict:
     renders the step records into frames and animations and returns what it measured and wrote;
     None, or options.render False: simulate only.
+    shown_dir: the folder the run is meant for, named in run.json and the summary, when out_dir is
+    a private staging folder that will replace it (`orthosim.outputfolder`). summary_to: receives
+    the summary line (when the verbosity shows it) instead of printing it, so that a caller can
+    print it once the folder is in place.
     """
     from contextlib import ExitStack
 
@@ -293,14 +300,14 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
     rendered: dict = {}
     with ExitStack() as stack:
         if not drawing:
-            split = _Split(simulation_stream(case, options.detector), log, keep)
+            split = _Split(simulation_stream(case, options.detector, out_dir), log, keep)
             for _ in _bar(split, case.steps + 1, log):
                 pass
             dent = None
         else:
             if options.simulate_in_process:
                 dent = case.build_dentition()
-                split, where = _Split(simulation_stream(case, options.detector, dentition=dent), log, keep), "in this process"
+                split, where = _Split(simulation_stream(case, options.detector, out_dir, dentition=dent), log, keep), "in this process"
             else:
                 from .background import ChildProcessIterator
 
@@ -312,7 +319,7 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
                     dent = case.build_dentition()
                     log.phase("model", time.perf_counter() - t, f"{dent.description}, built and cached")
                 given = dent if dent is not None and not case.dentition_is_cached() else None  # unwritable cache
-                child.submit(simulation_stream, case, options.detector, dentition=given)
+                child.submit(simulation_stream, case, options.detector, out_dir, dentition=given)
                 dent = dent or case.build_dentition()
                 split, where = _Split(child, log, keep), "beside the drawing"
             rendered = draw(dent, split, out_dir, options, extracted=frozenset(case.extractions), per_step=per_step,
@@ -329,7 +336,6 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
     result = split.result
     write_json(out_dir / "metrics.json", result.metrics)
     write_text(out_dir / "distances.csv", result.distances_csv)
-    write_text(out_dir / "distances_per_step.csv", result.distances_per_step_csv)
     scenes = []
     if options.export_scene:
         from .scene_export import export_scenes
@@ -342,19 +348,27 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
     log.timings_s["first_step_after_start"] = round(split.first_step_s or 0.0, 4)
     log.timings_s["total"] = round(process_age_s(), 4)
     extra = {
-        "out_dir": str(out_dir.resolve()),
+        "out_dir": str(Path(shown_dir or out_dir).resolve()),
         "options": {k: v for k, v in asdict(options).items() if k != "verbosity"},
         "frames_per_step": per_step,
         "timings_s": log.timings_s,
         "model_files": result.model_files,
         "render": {k: v for k, v in rendered.items() if k != "encode_s"} if rendered else None,
-        "scenes": [str(p) for p in scenes],
+        "scenes": [str(Path(p).relative_to(out_dir)) for p in scenes],  # relative: out_dir may be a staging folder
     }
     record = write_run_record(out_dir, case.path, options.detector, extra)  # last: marks the run finished
     m = result.metrics
-    log.summary(f"{case.name} ({options.detector}): {m['steps']} steps, total distance "
-                f"{m['total_distance_mm']['initial']:.2f} -> {m['total_distance_mm']['final']:.2f} mm, "
-                f"{m['collisions']} collisions, max penetration {m['max_penetration_mm']:.3f} mm -> {out_dir}/metrics.json")
+    start = m.get("initial_interpenetration") or []
+    initial = (f" beyond the {start[0]['mm']:.3f} mm the model starts with (teeth {start[0]['pair'][0]}-{start[0]['pair'][1]}"
+               f"{f' and {len(start) - 1} more pairs' if len(start) > 1 else ''})" if start else "")
+    line = (f"{case.name} ({options.detector}): {m['steps']} steps, total distance "
+            f"{m['total_distance_mm']['initial']:.2f} -> {m['total_distance_mm']['final']:.2f} mm, "
+            f"{m['collisions']} collisions, max penetration {m['max_penetration_mm']:.3f} mm{initial} "
+            f"-> {Path(shown_dir or out_dir)}/metrics.json")
+    if summary_to is not None and options.verbosity >= 1:
+        summary_to(line)
+    else:
+        log.summary(line)
     return record
 
 

@@ -135,7 +135,9 @@ class FrameSink:
         self._pad = (h % 2, w % 2)
         writer = imageio_ffmpeg.write_frames(
             str(tmp), (w + self._pad[1], h + self._pad[0]), pix_fmt_in="rgb24", fps=self.video_fps,
-            codec="libx264", macro_block_size=1, ffmpeg_log_level="error",
+            # quiet: ffmpeg's own lines would break the one-line error a failed write ends in (a full
+            # disk shows as the writer's OSError, which orthosim.outputfolder turns into that line)
+            codec="libx264", macro_block_size=1, ffmpeg_log_level="quiet",
             output_params=["-preset", "ultrafast", "-crf", "20"],
         )
         writer.send(None)  # start ffmpeg
@@ -370,5 +372,6 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
         "gl_renderer": gl_renderer,
         "video_fps": fps,
         "encode_s": encode_s,
-        "outputs": {k: v for k, v in written.items() if k != "frames"},
+        # relative to out_dir: a run folder may be written in a staging place and moved (orthosim.outputfolder)
+        "outputs": {k: os.path.relpath(v, out_dir) for k, v in written.items() if k != "frames"},
     }

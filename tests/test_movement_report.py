@@ -11,7 +11,7 @@ from orthosim.case import load_case
 from orthosim.collision import CollisionModel
 from orthosim.metrics import tooth_to_tooth_distances
 from orthosim.movement import MovementModel, simulate
-from orthosim.movement.report import RunReport
+from orthosim.movement.report import RunReport, read_steps
 from orthosim.parametric import parametric_dentition
 
 
@@ -37,7 +37,7 @@ movement = "translation"
     case = load_case(p)
     dent = parametric_dentition("coarse")
     model = MovementModel.build(case, dent, CollisionModel.from_dentition(dent, tree_builder=median_split_tree))
-    report = RunReport(model, "discrete")
+    report = RunReport(model, "discrete")  # per-step detail spooled, then written beside metrics.json
     records = list(report.collect(simulate(model, "discrete")))
     report.write(tmp / "out")
     return model, records, tmp / "out"
@@ -70,7 +70,8 @@ def test_distances_are_the_papers_crown_centre_distances_with_extraction_spaces_
 
 def test_each_step_records_poses_contacts_distances_penetration_collisions_and_forces(run):
     _, records, out = run
-    steps = json.loads((out / "metrics.json").read_text())["per_step"]
+    assert json.loads((out / "metrics.json").read_text())["per_step_file"] == "steps.jsonl"
+    steps = list(read_steps(out))
     assert [s["step"] for s in steps] == [0, 1, 2, 3]
     assert [s["time_days"] for s in steps] == [0, 7, 14, 21]
     later = steps[1]
@@ -99,3 +100,21 @@ def test_loaded_teeth_report_their_centre_of_resistance_and_movement(run):
     assert t16["movement"] == "translation"
     assert t16["moment_to_force_mm"] == pytest.approx(model.mechanics[16].bracket_lever_mm)  # the wire's counter-moment
     assert np.allclose(t16["center_of_resistance_local_mm"], model.mechanics[16].center_of_resistance)
+
+
+def test_memory_stays_flat_in_the_number_of_steps_as_per_step_detail_streams_to_disk(run, tmp_path):
+    import tracemalloc
+
+    model, records, _ = run
+    report = RunReport(model, "discrete", steps_file=tmp_path / "steps.jsonl")
+    for rec in records:
+        report.add(rec)
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    for _ in range(3000):  # a long run's worth of steps
+        report.add(records[-1])
+    grown = tracemalloc.get_traced_memory()[0] - before
+    tracemalloc.stop()
+    assert grown < 1_000_000, f"{grown / 1e6:.1f} MB kept for 3,000 steps"  # was ~10 kB a step kept in a list
+    report.write(tmp_path)
+    assert sum(1 for _ in read_steps(tmp_path)) == len(records) + 3000

@@ -54,6 +54,13 @@ def test_metrics_follow_the_published_schema_and_every_number_has_a_unit(two_run
     schema = json.loads(resources.files("orthosim").joinpath("schema/metrics.schema.json").read_text())
     metrics = json.loads((two_runs[0] / "metrics.json").read_text())
     jsonschema.validate(metrics, schema)
+    from orthosim.movement.report import read_steps
+
+    step_schema = {**schema["$defs"]["step"], "$defs": schema["$defs"]}
+    steps = list(read_steps(two_runs[0]))
+    assert len(steps) == metrics["steps"] + 1
+    for step in steps:  # steps.jsonl, the per-step detail metrics.json names
+        jsonschema.validate(step, step_schema)
 
     def node_for(node, key):
         props = node.get("properties", {})
@@ -91,7 +98,9 @@ def test_distances_per_step_table_matches_the_per_step_series(two_runs):
     header = rows[0].split(",")
     assert header[:3] == ["step", "time_days", "total_distance_mm"] and "15-13_mm" in header
     assert len(rows) - 1 == metrics["steps"] + 1
-    for row, step in zip(rows[1:], metrics["per_step"]):
+    from orthosim.movement.report import read_steps
+
+    for row, step in zip(rows[1:], read_steps(a), strict=True):
         cells = row.split(",")
         assert int(cells[0]) == step["step"]
         assert float(cells[2]) == pytest.approx(step["total_distance_mm"], abs=1e-4)

@@ -1,48 +1,85 @@
-"""What a run writes: metrics.json (the issue's output contract, plus per-step detail) and distances.csv.
+"""What a run writes: metrics.json (the issue's output contract), steps.jsonl (per-step detail) and distances.csv.
 
-    report = RunReport(model, detector)
+    report = RunReport(model, detector, steps_file=out_dir / STEPS_FILE,
+                       distances_file=out_dir / DISTANCES_PER_STEP_FILE)
     for record in simulate(model, detector):
         report.add(record)
     report.write(out_dir)
 
 metrics.json: `case`, `detector`, `steps`, `teeth` {FDI: `moved_mm` (crown centre displacement),
 `rotated_deg`, `final_pose` (4x4, mm), `extracted`; for loaded teeth also their centre of
-resistance, the loads' moment-to-force ratio (mm) and the movement it makes}, `total_distance_mm` {`initial`, `final`},
-`max_penetration_mm` (exact meshes, over the run: the deepest
-interpenetration the movement added to any pair; `initial_penetration_mm` is the model's own), `collisions` (count), `distances` (per adjacent
-pair: `pair`, `initial_mm`, `final_mm`), and `per_step`: for every step its time (days), the pose of
-every tooth, the touching pairs, the tooth-to-tooth distances and their total, the largest
-interpenetration, the collisions (with the impact response) and the propagated forces (cN).
+resistance, the loads' moment-to-force ratio (mm) and the movement it makes}, `total_distance_mm`
+{`initial`, `final`}, `max_penetration_mm` (exact meshes, over the run: the deepest
+interpenetration the movement added to any pair; `initial_penetration_mm` is the model's own, and
+`initial_interpenetration` lists the pairs that start interpenetrating beyond the touch tolerance,
+deepest first, as {`pair`, `mm`}), `collisions` (count), `distances` (per adjacent pair: `pair`,
+`initial_mm`, `final_mm`), and `per_step_file`: the name of the per-step detail beside it.
+steps.jsonl: one JSON object per line, one line per step (step 0, the initial state, first): its
+time (days), the pose of every tooth, the touching pairs, the tooth-to-tooth distances and their
+total, the largest interpenetration, the collisions (with the impact response) and the propagated
+forces (cN); `read_steps(out_dir)` yields them. Why a separate file, streamed: a run of 10,000
+steps holds some 100 MB of per-step detail, which kept in memory (and in metrics.json) grew the
+process past a gigabyte; streamed to disk step by step, memory stays flat in the run's length.
 distances.csv: one row per adjacent pair: pair, initial_mm, final_mm. distances_per_step.csv: one
-row per step: step, time_days, total_distance_mm and each pair's distance (mm), the series of
-`per_step` in a table. Files are written atomically.
+row per step: step, time_days, total_distance_mm and each pair's distance (mm), the distance series
+of steps.jsonl as a table, also streamed. metrics.json and distances.csv are written atomically;
+steps.jsonl and distances_per_step.csv are written as the run goes (`orthosim run` writes
+its whole run folder in private and swaps it in at the end, `orthosim.outputfolder`).
 """
 
 from __future__ import annotations
 
 import io
+import json
+import shutil
+import tempfile
+import warnings
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import IO, Iterable, Iterator
 
 import numpy as np
 
-from ..atomic import write_json, write_text
+from ..atomic import atomic_path, to_jsonable, write_json, write_text
 from ..collision.motion import rotation_angle
 from .biomechanics import movement_type
 from .simulation import MovementModel, StepRecord
 
 
-class RunReport:
-    """Collects StepRecords of one run and builds the metrics (mm, degrees, cN, days)."""
+STEPS_FILE = "steps.jsonl"
+DISTANCES_PER_STEP_FILE = "distances_per_step.csv"
 
-    def __init__(self, model: MovementModel, detector: str):
+
+class InitialInterpenetrationWarning(UserWarning):
+    """The model starts with teeth interpenetrating beyond the touch tolerance (pairs and depths named)."""
+
+
+def read_steps(out_dir: str | Path) -> Iterator[dict]:
+    """The per-step records of a run folder, in order, one at a time (see the module doc)."""
+    with open(Path(out_dir) / STEPS_FILE) as fh:
+        for line in fh:
+            yield json.loads(line)
+
+
+class RunReport:
+    """Collects StepRecords of one run and builds the metrics (mm, degrees, cN, days).
+
+    Only the first and the last record and running totals stay in memory; each step's detail goes
+    to `steps_file` as it comes (to a temporary file, copied into the run folder by `write`, when
+    no steps_file is given).
+    """
+
+    def __init__(self, model: MovementModel, detector: str, steps_file: str | Path | None = None,
+                 distances_file: str | Path | None = None):
         self.model = model
         self.detector = detector
         self.first: StepRecord | None = None
         self.last: StepRecord | None = None
         self.max_penetration_mm = 0.0
         self.collisions = 0
-        self.per_step: list[dict] = []
+        self.steps_file = Path(steps_file) if steps_file is not None else None
+        self._steps: IO[str] | None = None
+        self.distances_file = Path(distances_file) if distances_file is not None else None
+        self._distances: IO[str] | None = None
 
     def collect(self, records: Iterable[StepRecord]) -> Iterator[StepRecord]:
         """Pass the records through, adding each (so a renderer can draw them as they come)."""
@@ -53,6 +90,7 @@ class RunReport:
     def add(self, rec: StepRecord) -> None:
         if self.first is None:
             self.first = rec
+            self._warn_initial_interpenetration(rec)
         self.last = rec
         self.max_penetration_mm = max(self.max_penetration_mm, rec.max_penetration_mm)
         self.collisions += len(rec.collisions)
@@ -64,7 +102,7 @@ class RunReport:
                 "propagated_cN": {str(n): f for n, f in rec.forces.received.items() if np.any(f)},
                 "passed": [{"from": a, "to": b, "force_cN": f} for (a, b), f in rec.forces.passed.items()],
             }
-        self.per_step.append({
+        self._write_step({
             "step": rec.step,
             "time_days": rec.time_days,
             "poses": {str(n): rec.poses[n] for n in present},
@@ -76,6 +114,36 @@ class RunReport:
             "collisions": [{"pair": list(e.pair), "time": e.time, **e.impact} for e in rec.collisions],
             **forces,
         })
+
+    def _write_step(self, step: dict) -> None:
+        if self._steps is None:
+            self._steps = _spool(self.steps_file)
+            self._distances = _spool(self.distances_file)
+            pairs = [d["pair"] for d in step["distances_mm"]]
+            self._distances.write(",".join(["step", "time_days", "total_distance_mm",
+                                            *(f"{a}-{b}_mm" for a, b in pairs)]) + "\n")
+        self._steps.write(json.dumps(step, separators=(",", ":"), default=to_jsonable))
+        self._steps.write("\n")
+        values = [f"{d['mm']:.4f}" for d in step["distances_mm"]]
+        self._distances.write(",".join([str(step["step"]), f"{step['time_days']:g}",
+                                        f"{step['total_distance_mm']:.4f}", *values]) + "\n")
+
+    def initial_interpenetration(self) -> list[dict]:
+        """Pairs interpenetrating at the start beyond the touch tolerance: [{pair, mm}], deepest first."""
+        tol = self.model.settings.touch_tolerance_mm
+        first = self.first
+        return [{"pair": list(p), "mm": d} for p, d in (first.penetrating if first else ()) if d > tol]
+
+    def _warn_initial_interpenetration(self, first: StepRecord) -> None:
+        deep = [(p, d) for p, d in first.penetrating if d > self.model.settings.touch_tolerance_mm]
+        if not deep:
+            return
+        shown = ", ".join(f"{a} and {b} by {d:.3f} mm" for (a, b), d in deep[:5])
+        more = f" and {len(deep) - 5} more pairs" if len(deep) > 5 else ""
+        warnings.warn(f"{self.model.case.path}: teeth interpenetrate at the start, beyond the "
+                      f"{self.model.settings.touch_tolerance_mm:g} mm touch tolerance: {shown}{more}; penetration "
+                      "during the run is measured from these depths (fix: check the model's tooth positions and "
+                      "mesh scale)", InitialInterpenetrationWarning, stacklevel=3)
 
     def metrics(self) -> dict:
         if self.first is None:
@@ -113,10 +181,11 @@ class RunReport:
             "total_distance_mm": {"initial": first.total_distance_mm, "final": last.total_distance_mm},
             "max_penetration_mm": self.max_penetration_mm,
             "initial_penetration_mm": first.raw_penetration_mm,
+            "initial_interpenetration": self.initial_interpenetration(),
             "collisions": self.collisions,
             "distances": [{"pair": list(a.pair), "initial_mm": a.distance_mm, "final_mm": b.distance_mm}
                           for a, b in zip(first.distances, last.distances)],
-            "per_step": self.per_step,
+            "per_step_file": STEPS_FILE,
         }
 
     def _load_movements(self) -> dict[int, dict]:
@@ -150,21 +219,40 @@ class RunReport:
             out.write(f"{a.pair[0]}-{a.pair[1]},{a.distance_mm:.4f},{b.distance_mm:.4f}\n")
         return out.getvalue()
 
-    def distances_per_step_csv(self) -> str:
-        """One row per step: step, time_days, total_distance_mm, then each adjacent pair's distance (mm)."""
-        out = io.StringIO()
-        pairs = [d["pair"] for d in self.per_step[0]["distances_mm"]] if self.per_step else []
-        out.write(",".join(["step", "time_days", "total_distance_mm", *(f"{a}-{b}_mm" for a, b in pairs)]) + "\n")
-        for row in self.per_step:
-            values = [f"{d['mm']:.4f}" for d in row["distances_mm"]]
-            out.write(",".join([str(row["step"]), f"{row['time_days']:g}", f"{row['total_distance_mm']:.4f}", *values]) + "\n")
-        return out.getvalue()
-
     def write(self, out_dir: str | Path, extra: dict | None = None) -> dict:
-        """Write out_dir/metrics.json, distances.csv and distances_per_step.csv; returns the metrics."""
+        """Write out_dir/metrics.json, steps.jsonl, distances.csv and distances_per_step.csv; returns the metrics."""
         out_dir = Path(out_dir)
         metrics = {**self.metrics(), **(extra or {})}
+        self.finish_streams(out_dir)
         write_json(out_dir / "metrics.json", metrics)
         write_text(out_dir / "distances.csv", self.distances_csv())
-        write_text(out_dir / "distances_per_step.csv", self.distances_per_step_csv())
         return metrics
+
+    def finish_streams(self, out_dir: str | Path) -> None:
+        """Close the streamed per-step files, putting those spooled elsewhere into out_dir."""
+        out_dir = Path(out_dir)
+        _finish(self._steps, self.steps_file, out_dir / STEPS_FILE)
+        _finish(self._distances, self.distances_file, out_dir / DISTANCES_PER_STEP_FILE)
+        self._steps = self._distances = None
+
+
+def _spool(path: Path | None) -> IO[str]:
+    """The file a stream is written to: `path`, or an anonymous temporary file when None."""
+    if path is None:
+        return tempfile.TemporaryFile("w+")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return open(path, "w")
+
+
+def _finish(fh: IO[str] | None, path: Path | None, target: Path) -> None:
+    """Close a stream; copy it to `target` (atomically) unless it was written there already."""
+    if fh is None:
+        return
+    if path is not None and path.resolve() == target.resolve():
+        fh.close()
+        return
+    fh.flush()
+    fh.seek(0)
+    with atomic_path(target) as tmp, open(tmp, "w") as out:
+        shutil.copyfileobj(fh, out)
+    fh.close()

@@ -101,6 +101,7 @@ class StepRecord:
         exact meshes (mm; depth now less depth in the initial model, which may have some).
     distances: the paper's tooth-to-tooth distances (mm) per adjacent pair.
     raw_penetration_mm: deepest interpenetration of any candidate pair as it stands (mm).
+    penetrating: ((a, b), mm) for every candidate pair interpenetrating as it stands, deepest first.
     """
 
     step: int
@@ -115,6 +116,7 @@ class StepRecord:
     max_penetration_mm: float
     distances: tuple[PairDistance, ...]
     raw_penetration_mm: float = 0.0
+    penetrating: tuple[tuple[tuple[int, int], float], ...] = ()
 
     @property
     def total_distance_mm(self) -> float:
@@ -412,6 +414,10 @@ def _deepening(depths: dict, initial: dict) -> float:
     return max((d - initial.get(p, 0.0) for p, d in depths.items()), default=0.0)
 
 
+def _deepest_first(depths: dict) -> tuple[tuple[tuple[int, int], float], ...]:
+    return tuple(sorted(((tuple(map(int, p)), float(d)) for p, d in depths.items()), key=lambda item: -item[1]))
+
+
 def _impact(model: MovementModel, pair, motions, P_contact, dt, centers, restitution) -> dict:
     bodies = []
     for n in pair:
@@ -451,7 +457,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
     depth_memo: dict = {}
     initial_depths = penetrations(model, P, depth_memo)
     yield StepRecord(0, 0.0, {n: T.copy() for n, T in P.items()}, frozenset(), tuple(touching), leaves[0], leaves[1],
-                     (), None, 0.0, dist, max(initial_depths.values(), default=0.0))
+                     (), None, 0.0, dist, max(initial_depths.values(), default=0.0), _deepest_first(initial_depths))
     for k in range(1, n_steps + 1):
         centers = _crown_centers(model, P)
         # 1. forces
@@ -556,7 +562,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
         dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
         yield StepRecord(k, k * dt, {n: T.copy() for n, T in P.items()}, moved, tuple(touching), leaves[0], leaves[1],
                          tuple(events), balance, max(0.0, _deepening(depths := penetrations(model, P, depth_memo), initial_depths)), dist,
-                         max(depths.values(), default=0.0))
+                         max(depths.values(), default=0.0), _deepest_first(depths))
 
 
 def simulate_case(case: Case, detector: str | None = None, steps: int | None = None,

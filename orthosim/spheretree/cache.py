@@ -18,7 +18,7 @@ from __future__ import annotations
 import hashlib
 import multiprocessing
 import os
-import zipfile
+import warnings
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_path
+from ..lifeline import exit_with_parent
 from .build import build_sphere_tree, check_request, mesh_arrays
 from .tree import SphereTree
 
@@ -103,17 +104,60 @@ def _entry(mesh, method: str, branching: int, depth: int, folder: Path) -> _Entr
     return _Entry(folder / f"{min(key, mirror_key)}.npz", flip, mirrored if flip else (vertices, faces))
 
 
+class DamagedCacheWarning(UserWarning):
+    """A sphere-tree cache entry was unreadable or wrong; it is rebuilt (the message says which and why)."""
+
+
+# Slack (mm) when checking that a stored tree still holds its mesh: the builder's own guarantee is
+# exact, and a damaged entry misses by far more than this.
+_HOLD_TOL_MM = 1e-6
+
+
+def damage(tree: SphereTree, vertices: np.ndarray, faces: np.ndarray, branching: int, depth: int) -> str | None:
+    """Why a loaded tree cannot be this mesh's conservative tree, or None when it can.
+
+    The full invariant, checked on every load: the layout, finite positive numbers, and every face
+    inside its leaf and every ancestor of it (`SphereTree.validate`). A tree that is wrong in any of
+    these would give wrong collisions silently, and checking costs a few milliseconds a tree
+    (vectorised over faces), small beside the load itself.
+    """
+    if tree.branching != branching or tree.depth != depth:
+        return f"branching {tree.branching}, depth {tree.depth} where {branching}, {depth} was asked"
+    if len(tree.leaf_of_face) != len(faces):
+        return f"{len(tree.leaf_of_face)} faces where the mesh has {len(faces)}"
+    for k in range(depth):
+        c, r = tree.centers[k], tree.radii[k]
+        if c.ndim != 2 or c.shape[1:] != (3,) or r.shape != (len(c),) or len(tree.parents[k]) != len(c):
+            return f"level {k} has mismatched array shapes"
+        if not (np.isfinite(c).all() and np.isfinite(r).all()):
+            return f"level {k} holds non-finite centres or radii"
+        if not (r > 0).all():
+            return f"level {k} holds non-positive radii"
+    leaf = tree.leaf_of_face
+    if len(leaf) and (leaf.min() < 0 or leaf.max() >= len(tree.radii[-1])):
+        return "a face names a leaf that does not exist"
+    try:
+        tree.validate(vertices, faces, tol=_HOLD_TOL_MM)
+    except (ValueError, IndexError) as err:
+        return f"its spheres do not bound the mesh ({err})"
+    return None
+
+
 def _load(entry: _Entry, branching: int, depth: int) -> SphereTree | None:
-    """The stored tree, or None when absent, damaged or not this request's (rebuilt and overwritten)."""
-    if not entry.path.is_file():
-        return None
+    """The stored tree, or None when absent or damaged (then rebuilt and overwritten, with a warning)."""
     try:
         tree = load_tree(entry.path)
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile):
+    except FileNotFoundError:
         return None
-    if len(tree.leaf_of_face) != len(entry.mesh[1]) or tree.branching != branching or tree.depth != depth:
-        return None
-    return tree
+    except Exception as err:  # empty, truncated, garbage: numpy and zipfile raise many types (EOFError too)
+        reason = f"unreadable ({type(err).__name__}: {err})"
+    else:
+        reason = damage(tree, *entry.mesh, branching, depth)
+        if reason is None:
+            return tree
+    warnings.warn(f"sphere-tree cache entry {entry.path} is damaged: {reason}; rebuilding it", DamagedCacheWarning,
+                  stacklevel=3)
+    return None
 
 
 def _store(tree: SphereTree, entry: _Entry) -> None:
@@ -168,7 +212,9 @@ def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int = 
             yield from ((e, _build(job)) for job, e in zip(jobs, waiting))
             return
         # fork: the children start at once with the parent's imports and compiled kernels
-        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork")) as pool:
+        # each worker ends with this process if it is killed outright (orthosim.lifeline)
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                                 initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
             futures = {pool.submit(_build, job): e for job, e in zip(jobs, waiting)}
             for done in as_completed(futures):
                 yield futures[done], done.result()

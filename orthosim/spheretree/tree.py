@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,13 +66,40 @@ class SphereTree:
         if vertices is None or faces is None:
             return
         # Each face inside its leaf, and inside every ancestor of that leaf.
-        node = np.asarray(self.leaf_of_face)
-        tri = vertices[faces]  # (F, 3, 3)
+        vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+        faces = np.ascontiguousarray(faces, dtype=np.int64)
+        node = np.asarray(self.leaf_of_face, dtype=np.int64)
+        if len(node) != len(faces) or (len(node) and (node.max() >= self.n_leaves or node.min() < -self.n_leaves)):
+            raise ValueError("leaf_of_face must name one existing leaf per face")
+        if len(faces) and (faces.min() < 0 or faces.max() >= len(vertices)):
+            raise ValueError("faces refer to vertices that do not exist")
         for k in range(self.depth - 1, -1, -1):
-            c, r = self.centers[k][node], self.radii[k][node]
-            d = np.linalg.norm(tri - c[:, None, :], axis=2).max(axis=1)
-            bad = d > r + tol
-            if bad.any():
-                raise ValueError(f"level {k}: {int(bad.sum())} faces not inside their covering sphere")
+            outside = _faces_outside(vertices, faces, node, np.ascontiguousarray(self.centers[k], dtype=np.float64),
+                                     np.ascontiguousarray(self.radii[k], dtype=np.float64), float(tol))
+            if outside:
+                raise ValueError(f"level {k}: {outside} faces not inside their covering sphere")
             if k:
                 node = self.parents[k][node]
+
+
+@njit(cache=True, nogil=True)
+def _faces_outside(vertices, faces, node, centers, radii, tol):  # pragma: no cover (compiled)
+    """How many faces have a vertex farther than radius + tol from the centre of their node.
+
+    Compiled because the sphere-tree cache checks every tree it loads this way (`spheretree.cache`):
+    in numpy the (faces, 3, 3) temporaries made the check cost more than the load.
+    """
+    count = 0
+    for f in range(faces.shape[0]):
+        n = node[f]
+        limit = (radii[n] + tol) ** 2
+        for j in range(3):
+            v = faces[f, j]
+            d = 0.0
+            for a in range(3):
+                e = vertices[v, a] - centers[n, a]
+                d += e * e
+            if not d <= limit:  # NaN counts as outside
+                count += 1
+                break
+    return count
