@@ -85,6 +85,8 @@ def render_options(f):
                      help="Animation frames per simulation step (positions interpolated between steps).")(f)
     f = click.option("--contact-faces", is_flag=True,
                      help="Also colour the tooth surface inside each contact sphere (as in the paper's Figure 7).")(f)
+    f = click.option("--contact-faces-exact", is_flag=True,
+                     help="Colour only the triangles within 0.05 mm of the tooth they touch (exact), not all inside the spheres.")(f)
     return f
 
 
@@ -219,7 +221,8 @@ def _render_steps(dent, records, extracted, out_dir: Path, opts: dict) -> dict:
     return render_run(dent, frames, out_dir, views=opts.get("views") or ("frontal",), size=opts["size"],
                       gif=opts.get("gif", False), alpha=opts.get("alpha", False),
                       hide_roots=opts.get("hide_roots", False),
-                      color_contact_faces=opts.get("contact_faces", False))
+                      color_contact_faces=opts.get("contact_faces", False),
+                      exact_contact_faces=opts.get("contact_faces_exact", False))
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:

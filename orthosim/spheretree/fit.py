@@ -26,7 +26,7 @@ All coordinates in mm, in the mesh's frame.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
@@ -58,6 +58,9 @@ class FitOptions:
     relative_depth: bool = True  # reassignment compares depth / radius (True) or depth in mm
     refit_rounds: int = 8  # pattern-search rounds after each reassignment
     seed: int = 0
+    smooth_count: bool = False
+    polish_voxel_mm: float = 0.0  # > 0: a last search of every leaf centre on a finer band of this spacing
+    polish_band_mm: float = 0.3
 
 
 def medial_radii(
@@ -169,7 +172,7 @@ class _LeafFitter:
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, options: FitOptions):
         self.vertices, self.faces, self.options = vertices, faces, options
         self.band = OutsideBand(vertices, faces, voxel_mm=options.voxel_mm, max_voxels=options.max_voxels,
-                                band_mm=options.band_mm, fine_mm=options.fine_band_mm)
+                                band_mm=options.band_mm, fine_mm=options.fine_band_mm, smooth=options.smooth_count)
         self.voxel = self.band.voxel
         self.count = self.band.count  # outside volume of spheres, (n, 3) and (n,) mm, in fine voxels
 
@@ -385,6 +388,13 @@ def fit_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: 
         # Slots the last reassignment freed go to the worst leaves: more spheres, less outside.
         leaf, c, r = _split_worst(fitter, leaf, c, r, n_leaves - len(r), rng)
         leaf, c, r = _compact(leaf, c, r)
+    if options.polish_voxel_mm > 0:
+        fine = replace(options, voxel_mm=options.polish_voxel_mm, band_mm=options.polish_band_mm,
+                       fine_band_mm=options.polish_band_mm, max_voxels=8 * options.max_voxels)
+        fitter = _LeafFitter(vertices, faces, fine)
+        pts = vertices[node_vertex_groups(faces, leaf, len(r))]
+        c = fitter.search(pts, c, np.full(len(r), 2 * fitter.voxel), options.refit_rounds)
+        r = radii_to_cover(pts, c)
     return leaf, c, r
 
 
