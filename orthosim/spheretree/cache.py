@@ -30,7 +30,7 @@ from ..atomic import atomic_path
 from .build import build_sphere_tree, check_request, mesh_arrays
 from .tree import SphereTree
 
-BUILDER_VERSION = 7
+BUILDER_VERSION = 8
 
 
 def default_cache_dir() -> Path:
