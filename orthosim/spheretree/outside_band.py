@@ -58,52 +58,6 @@ def _count_in_spheres(prefix, origin, h, centres, radii):
     return out
 
 
-@njit(cache=True, nogil=True)
-def _weight_in_spheres(prefix, origin, h, centres, radii):
-    """As `_count_in_spheres`, but each column's run counts its end voxels by the share of their
-    length inside the sphere: (n,) float64, continuous in the sphere's z extent."""
-    nx, ny, nzp = prefix.shape
-    nz = nzp - 1
-    out = np.zeros(len(radii), np.float64)
-    for s in range(len(radii)):
-        cx, cy, cz, r = centres[s, 0], centres[s, 1], centres[s, 2], radii[s]
-        if not r >= 0.0:
-            continue
-        r2 = r * r
-        i0 = max(int(np.ceil((cx - r - origin[0]) / h)), 0)
-        i1 = min(int(np.floor((cx + r - origin[0]) / h)), nx - 1)
-        total = 0.0
-        for i in range(i0, i1 + 1):
-            dx = origin[0] + h * i - cx
-            rx = r2 - dx * dx
-            if rx < 0.0:
-                continue
-            ry = np.sqrt(rx)
-            j0 = max(int(np.ceil((cy - ry - origin[1]) / h)), 0)
-            j1 = min(int(np.floor((cy + ry - origin[1]) / h)), ny - 1)
-            for j in range(j0, j1 + 1):
-                dy = origin[1] + h * j - cy
-                rz = rx - dy * dy
-                if rz < 0.0:
-                    continue
-                half = np.sqrt(rz)
-                # voxel k spans [k - 1/2, k + 1/2] in grid units; cumulative weight at u, interpolated
-                acc = 0.0
-                for sign in (-1.0, 1.0):
-                    u = (cz + sign * half - origin[2]) / h + 0.5
-                    if u <= 0.0:
-                        f = 0.0
-                    elif u >= nz:
-                        f = float(prefix[i, j, nz])
-                    else:
-                        k = int(u)
-                        f = prefix[i, j, k] + (u - k) * (prefix[i, j, k + 1] - prefix[i, j, k])
-                    acc += sign * f
-                total += acc
-        out[s] = total
-    return out
-
-
 class OutsideBand:
     """The outside band of a closed mesh ((n, 3) float64 mm, (m, 3) int) as a counting grid.
 
@@ -112,13 +66,12 @@ class OutsideBand:
     """
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, *, voxel_mm: float, max_voxels: int,
-                 band_mm: float, fine_mm: float, smooth: bool = False):
+                 band_mm: float, fine_mm: float):
         lo, hi = vertices.min(axis=0) - band_mm, vertices.max(axis=0) + band_mm
         h = max(voxel_mm, float(np.prod(hi - lo) / max_voxels) ** (1 / 3))
         shape = tuple(int(n) for n in np.ceil((hi - lo) / h).astype(np.int64) + 1)
         self.origin = lo - h * 0.318309886
         self.voxel = h
-        self.smooth = smooth
         inside = CrossingIndex(vertices, faces).voxels(self.origin, h, shape)
         dist = ndimage.distance_transform_edt(~inside) * h
         weight = np.where(~inside & (dist <= fine_mm), 1, 0).astype(np.int32)
@@ -135,6 +88,4 @@ class OutsideBand:
         """Outside volume of spheres, (n, 3) and (n,) mm, in fine voxels: (n,) int64."""
         centres = np.ascontiguousarray(centres, dtype=np.float64).reshape(-1, 3)
         radii = np.ascontiguousarray(radii, dtype=np.float64).ravel()
-        if self.smooth:
-            return _weight_in_spheres(self.prefix, self.origin, self.voxel, centres, radii)
         return _count_in_spheres(self.prefix, self.origin, self.voxel, centres, radii)
