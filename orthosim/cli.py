@@ -120,6 +120,8 @@ def render_options(f):
                      help="Print each phase with its time even when the output is not a terminal.")(f)
     f = click.option("--contact-faces", is_flag=True,
                      help="Also colour the tooth surface inside each contact sphere (as in the paper's Figure 7).")(f)
+    f = click.option("--contact-faces-exact", is_flag=True,
+                     help="Colour only the triangles within 0.05 mm of the tooth they touch (exact), not all inside the spheres.")(f)
     return f
 
 
@@ -309,6 +311,7 @@ def run_options(detector: str | None, opts: dict) -> RunOptions:
     return RunOptions(detector=detector, render=not get("no_render", False), views=tuple(get("views") or ()) or d.views,
                       size=tuple(get("size", d.size)), gif=get("gif", d.gif), alpha=get("alpha", d.alpha),
                       hide_roots=get("hide_roots", d.hide_roots), contact_faces=get("contact_faces", d.contact_faces),
+                      contact_faces_exact=get("contact_faces_exact", d.contact_faces_exact),
                       frames_per_step=get("frames_per_step"), seconds=get("seconds"), fps=get("fps", d.fps),
                       split_views=get("split_views", d.split_views), export_scene=get("export_scene"),
                       export_steps=get("export_steps"), simulate_in_process=get("simulate_in_process", False),
@@ -346,7 +349,8 @@ def _render_steps(dent, records, out_dir: Path, options: RunOptions, *, extracte
     frames = frames_from_steps(records, extracted, per_step)
     return render_run(dent, frames, out_dir, views=options.views, size=options.size, gif=options.gif, alpha=options.alpha,
                       hide_roots=options.hide_roots, color_contact_faces=options.contact_faces, fps=options.fps,
-                      split_views=options.split_views, total=total, progress=progress)
+                      split_views=options.split_views, total=total, progress=progress,
+                      exact_contact_faces=options.contact_faces_exact)
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:

@@ -59,6 +59,7 @@ class RunOptions:
     alpha: bool = False
     hide_roots: bool = False
     contact_faces: bool = False
+    contact_faces_exact: bool = False  # colour only the triangles within the touch tolerance (exact)
     frames_per_step: int | None = None
     seconds: float | None = None
     fps: int = 30

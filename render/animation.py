@@ -310,7 +310,8 @@ class _Progress:
 def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, views: Sequence[str] = ("frontal",),
                size: tuple[int, int] = (640, 480), gif: bool = False, alpha: bool = False, progress: bool = True,
                hide_roots: bool = False, color_contact_faces: bool = False, png: bool = True, mp4: bool = True,
-               fps: int = VIDEO_FPS, split_views: bool = False, total: int | None = None) -> dict:
+               fps: int = VIDEO_FPS, split_views: bool = False, total: int | None = None,
+               exact_contact_faces: bool = False) -> dict:
     """Render every state in `frames` into out_dir (frames/NNNNN.png, animation.mp4, animation.gif).
 
     `frames` is taken ahead on a thread (`prefetch`); `orthosim run` feeds it the records of a
@@ -332,7 +333,8 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
     out_dir = Path(out_dir)
     if total is None:
         total = len(frames) if hasattr(frames, "__len__") else None
-    scene = DentitionScene(dentition, size, hide_roots=hide_roots, color_contact_faces=color_contact_faces)
+    scene = DentitionScene(dentition, size, hide_roots=hide_roots, color_contact_faces=color_contact_faces,
+                           exact_contact_faces=exact_contact_faces)
     sink = FrameSink(out_dir, png=png, mp4=mp4, gif=gif, video_fps=fps, split_views=views if split_views else ())
     bar = _Progress(progress, total)
     render_s = 0.0

@@ -51,6 +51,10 @@ OCCLUSAL_MARGIN = 1.5  # mm: contacts this close to the occlusal plane show in b
 _scene_ids = itertools.count(1)
 
 
+def _drawn_parts(hide_roots: bool) -> list:
+    return [CROWN] if hide_roots else [CROWN, ROOT]
+
+
 def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: bool):
     """Vertices duplicated along the CEJ so crown and root faces get their own colour.
 
@@ -59,7 +63,7 @@ def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: boo
     colours (n, 4) float32, indices (m, 3) uint32.
     """
     normals = mesh.vertex_normals
-    parts = [CROWN] if hide_roots else [CROWN, ROOT]
+    parts = _drawn_parts(hide_roots)
     pos, nrm, col, idx = [], [], [], []
     offset = 0
     for part in parts:
@@ -94,6 +98,12 @@ class _ToothDrawable:
         self.mesh = pyrender.Mesh([self.primitive], name=f"tooth {fdi}")
         self.node = pyrender.Node(name=f"tooth {fdi}", mesh=self.mesh, matrix=tooth.rest_pose)
         self.kdtree = cKDTree(pos.astype(np.float64)) if keep_kdtree else None  # local frame: built once
+        self.indices = idx  # (m, 3) drawn vertices of each drawn face
+        # drawn row of each mesh face (-1: not drawn); rows run over the parts in drawing order
+        order = np.concatenate([np.flatnonzero(tooth.face_part == part) for part in _drawn_parts(hide_roots)])
+        self.row_of_face = np.full(len(tooth.mesh.faces), -1, np.int64)
+        self.row_of_face[order] = np.arange(len(order))
+        self.contact_surface = None  # built on first use by exact contact faces
         # bounding sphere in the local frame, to skip teeth far from every contact
         self.center_local = pos.mean(axis=0).astype(np.float64)
         self.radius_local = float(np.linalg.norm(pos - self.center_local, axis=1).max())
@@ -110,7 +120,8 @@ class DentitionScene:
     """A pyrender scene of one dentition, its contact markers, the camera and the light rig."""
 
     def __init__(self, dentition: Dentition, size: tuple[int, int] = (640, 480), *, hide_roots: bool = False,
-                 color_contact_faces: bool = False, show_markers: bool = True, marker_style: str = "sprite",
+                 color_contact_faces: bool = False, exact_contact_faces: bool = False, show_markers: bool = True,
+                 marker_style: str = "sprite",
                  marker_subdivisions: int = 1, frame_points: np.ndarray | None = None, unique_markers: bool = True):
         """`marker_style`: "sprite" draws each contact sphere as a ray-cast point sprite (cheap at
         thousands of markers); "mesh" as an instanced icosphere (80 triangles at the default
@@ -124,7 +135,8 @@ class DentitionScene:
         self.dentition = dentition
         self.size = (int(size[0]), int(size[1]))
         self.hide_roots = hide_roots
-        self.color_contact_faces = color_contact_faces
+        self.color_contact_faces = color_contact_faces or exact_contact_faces
+        self.exact_contact_faces = exact_contact_faces
         self.show_markers = show_markers
         self.unique_markers = unique_markers
         self.scene = pyrender.Scene(bg_color=[*BACKGROUND, 0.0], ambient_light=AMBIENT)
@@ -133,7 +145,7 @@ class DentitionScene:
 
         self.teeth: dict[int, _ToothDrawable] = {}
         for fdi in dentition.fdis:
-            d = _ToothDrawable(pyrender, fdi, dentition.teeth[fdi], hide_roots, color_contact_faces)
+            d = _ToothDrawable(pyrender, fdi, dentition.teeth[fdi], hide_roots, self.color_contact_faces)
             self.teeth[fdi] = d
             self.scene.add_node(d.node)
 
@@ -285,14 +297,45 @@ class DentitionScene:
         self.markers._bounds = None
         self.buffer_versions[self.markers] = self.buffer_versions.get(self.markers, 0) + 1
 
+    def _pose(self, state: FrameState, fdi: int) -> np.ndarray:
+        return np.asarray(state.poses.get(fdi, self.dentition.teeth[fdi].rest_pose), float)
+
+    def _exact_hits(self, state: FrameState, fdi: int, d: _ToothDrawable) -> np.ndarray | None:
+        """Drawn vertices of the triangles of tooth `fdi` that touch a tooth it is in contact with."""
+        from orthosim.collision.contact_area import faces_in_spheres, faces_touching_any
+
+        partners = [b if a == fdi else a for a, b in state.contact_pairs if fdi in (a, b)]
+        partners = [p for p in partners if p in self.teeth and p not in state.extracted]
+        if not partners:
+            return None
+        candidates = faces_in_spheres(self._surface(fdi), self._pose(state, fdi), state.contact_centers, state.contact_radii)
+        faces = faces_touching_any(self._surface(fdi), self._pose(state, fdi), candidates,
+                                   [(self._surface(p), self._pose(state, p)) for p in partners])
+        rows = d.row_of_face[faces]
+        rows = rows[rows >= 0]
+        return np.unique(d.indices[rows]) if len(rows) else None
+
+    def _surface(self, fdi: int):
+        from orthosim.collision.contact_area import ContactSurface
+
+        d = self.teeth[fdi]
+        if d.contact_surface is None:
+            mesh = self.dentition.teeth[fdi].mesh
+            d.contact_surface = ContactSurface(mesh.vertices, mesh.faces)
+        return d.contact_surface
+
     def _paint_contact_faces(self, state: FrameState) -> None:
-        """Colour the vertices of each tooth that lie inside a contact sphere (the paper's Figure 7)."""
+        """Colour the vertices of each tooth that lie inside a contact sphere (the paper's Figure 7),
+        or with `exact_contact_faces` the triangles that touch the other tooth."""
         centers, radii = state.contact_centers, state.contact_radii
         involved = {f for pair in state.contact_pairs for f in pair}
         for fdi, d in self.teeth.items():
             hits = None
-            if len(radii) and (not state.contact_pairs or fdi in involved) and fdi not in state.extracted:
-                pose = np.asarray(state.poses.get(fdi, self.dentition.teeth[fdi].rest_pose), float)
+            if self.exact_contact_faces:
+                if len(radii) and fdi in involved and fdi not in state.extracted:
+                    hits = self._exact_hits(state, fdi, d)
+            elif len(radii) and (not state.contact_pairs or fdi in involved) and fdi not in state.extracted:
+                pose = self._pose(state, fdi)
                 local = (centers - pose[:3, 3]) @ pose[:3, :3]
                 near = np.linalg.norm(local - d.center_local, axis=1) <= radii + d.radius_local
                 if near.any():

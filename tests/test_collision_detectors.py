@@ -272,3 +272,16 @@ def test_continuous_contact_leaves_are_drawn_where_the_teeth_are_at_first_contac
     leaves_b = model.bodies[1].tree.leaf_centers[res.leaf_pairs[:, 1]]
     expected = leaves_b @ pose_b[:3, :3].T + pose_b[:3, 3]
     assert np.abs(res.centers_b - expected).max() <= 1e-3
+
+
+def test_false_positive_bands_count_each_separated_pose_once_in_its_band():
+    from orthosim.collision.validate import false_positive_bands
+
+    dist = np.array([0.0, 0.05, 0.1, 0.12, 0.2, 0.25, 0.3, 0.9, 1.5, 4.0])
+    found = np.array([True, True, True, True, False, False, True, False, False, False])
+    bands = false_positive_bands(dist, found)
+    assert sum(b["poses"] for b in bands.values()) == 9  # the intersecting pose (distance 0) is in none
+    assert bands["0.1-0.25mm"] == {"poses": 3, "rate": 1 / 3}  # 0.12 and 0.2 and 0.25; 0.1 is the band below
+    assert bands["0.0-0.1mm"] == {"poses": 2, "rate": 1.0}
+    assert bands[">2.0mm"] == {"poses": 1, "rate": 0.0}
+    assert bands["1.0-2.0mm"]["rate"] == 0.0

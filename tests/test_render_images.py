@@ -285,3 +285,38 @@ def test_occlusal_views_keep_only_the_contacts_of_the_shown_arch(renderer, denti
     assert len(shown["frontal"]) == 2
     assert np.allclose(shown["maxillary_occlusal"], [upper[1]])
     assert np.allclose(shown["mandibular_occlusal"], [lower[1]])
+
+
+def test_exact_contact_faces_are_the_touching_part_of_what_the_spheres_cover(dentition):
+    from orthosim.collision.contact_area import TOUCH_TOLERANCE_MM
+    from orthosim.spheretree import cached_sphere_tree
+
+    # the central incisors of the model touch within 0.05 mm at rest: their overlapping leaf spheres
+    spheres = []
+    for a, b in ((11, 21), (21, 11)):
+        ta, tb = (cached_sphere_tree(dentition.teeth[n].mesh) for n in (a, b))
+        ca = dentition.teeth[a].to_world(ta.leaf_centers)
+        cb = dentition.teeth[b].to_world(tb.leaf_centers)
+        near = np.linalg.norm(ca[:, None] - cb[None], axis=2) <= ta.leaf_radii[:, None] + tb.leaf_radii[None]
+        keep = near.any(axis=1)
+        spheres.append((ca[keep], ta.leaf_radii[keep]))
+    centers = np.concatenate([c for c, _ in spheres])
+    radii = np.concatenate([r for _, r in spheres])
+    state = FrameState.rest(dentition, contact_centers=centers, contact_radii=radii, contact_pairs=((11, 21),))
+    painted = {}
+    for exact in (False, True):
+        scene = DentitionScene(dentition, SIZE, color_contact_faces=True, exact_contact_faces=exact)
+        scene.update(state)
+        colours = np.asarray(scene.teeth[11].primitive.color_0)[:, :3]
+        painted[exact] = np.all(np.isclose(colours, scene_contact_colour()), axis=1)
+    assert painted[True].any()
+    assert not np.any(painted[True] & ~painted[False])  # exact faces lie inside the spheres
+    assert painted[True].sum() < 0.5 * painted[False].sum()  # and are far fewer than the spheres hold
+    # every painted vertex is near the other incisor (within the tolerance plus one triangle)
+    d = scene.teeth[11]
+    world = dentition.teeth[11].to_world(np.asarray(d.primitive.positions, float)[painted[True]])
+    other = dentition.teeth[21]
+    from scipy.spatial import cKDTree
+    gap, _ = cKDTree(other.to_world(other.mesh.vertices)).query(world)
+    edge = float(dentition.teeth[11].mesh.edges_unique_length.max())
+    assert gap.max() <= TOUCH_TOLERANCE_MM + 2 * edge

@@ -134,3 +134,16 @@ def test_outside_band_counts_exactly_the_weighted_voxels_inside_each_sphere():
     r = rng.uniform(0.1, 3.0, 400)
     expected = [w[kd.query_ball_point(ci, ri)].sum() for ci, ri in zip(c, r)]
     np.testing.assert_array_equal(band.count(c, r), expected)
+
+
+def test_fine_meshes_are_scored_on_finer_voxels_and_coarse_ones_keep_the_default():
+    from orthosim.spheretree.fit import FitOptions, voxel_spacing
+
+    opts = FitOptions()
+    fine = trimesh.creation.icosphere(subdivisions=6, radius=5.0)  # edges about 0.08 mm
+    coarse = trimesh.creation.icosphere(subdivisions=3, radius=5.0)  # edges about 0.6 mm
+    assert voxel_spacing(fine.vertices, fine.faces, opts) == opts.min_voxel_mm
+    assert voxel_spacing(coarse.vertices, coarse.faces, opts) == opts.voxel_mm
+    mid = trimesh.creation.icosphere(subdivisions=5, radius=5.0)  # edges about 0.16 mm
+    edge = np.median(mid.edges_unique_length)
+    assert np.isclose(voxel_spacing(mid.vertices, mid.faces, opts), opts.voxel_per_edge * edge, rtol=0.05)

@@ -66,6 +66,32 @@ def test_eval_json_has_the_contract_fields(tmp_path, mesh_folder):
     assert {"sov_sum_mean", "sov_sum_min", "sov_sum_max", "sov_union_mean", "surface_coverage_min"} <= set(s)
     assert s["sov_sum_min"] <= s["sov_sum_mean"] <= s["sov_sum_max"]
     assert np.isclose(s["sov_sum_mean"], np.mean([t["sov_sum"] for t in data["teeth"]]))
+    values = [t["sov_sum"] for t in data["teeth"]]
+    assert np.isclose(s["sov_sum_sem"], np.std(values, ddof=1) / np.sqrt(len(values)))
+    assert 0 < s["sov_sum_mean_mc_stderr"] < max(t["sov_sum_stderr"] for t in data["teeth"])
+
+
+def test_eval_takes_both_arches_of_an_open_full_jaw_patient_named_by_universal_number(tmp_path):
+    # Open-Full-Jaw names files by Universal number: tooth_3 is the upper right first molar, FDI 16,
+    # and tooth_19 the lower left one, FDI 36 (not FDI 19, which does not exist)
+    for arch, universal in (("maxilla", 3), ("mandible", 19)):
+        folder = tmp_path / arch
+        folder.mkdir()
+        trimesh.creation.capsule(height=8.0, radius=4.0, count=[16, 16]).export(folder / f"tooth_{universal}.stl")
+        trimesh.creation.capsule(height=9.0, radius=3.0, count=[16, 16]).export(folder / f"tooth_{universal + 1}.stl")
+        (folder / f"teeth_axes_{arch}.json").write_text("{}")  # eval reads meshes as scanned: no axes needed
+    out = tmp_path / "eval.json"
+    res = CliRunner().invoke(spheretree, ["eval", str(tmp_path / "maxilla"), str(tmp_path / "mandible"), "--depth", "2",
+                                          "--samples", "10000", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    data = json.loads(out.read_text())
+    assert sorted((t["universal"], t["fdi"]) for t in data["teeth"]) == [(3, 16), (4, 15), (19, 36), (20, 35)]
+    assert data["summary"]["teeth"] == 4 and len(data["sources"]) == 2
+
+
+def test_eval_refuses_a_tooth_given_twice(tmp_path, mesh_folder):
+    with pytest.raises(SphereTreeError, match="given twice"):
+        spheretree.main(["eval", str(mesh_folder), str(mesh_folder), "--out", str(tmp_path / "e.json")], standalone_mode=False)
 
 
 @pytest.mark.parametrize("args,text", [

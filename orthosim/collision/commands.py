@@ -55,7 +55,8 @@ def _headline(report: dict) -> dict:
         far = report["discrete_far"]["sets"][name]["false_positive_rate"]
         out[f"discrete/{name}"] = {"poses": res["poses"], "false_negatives": res["false_negatives"],
                                   "fp_rate": {**{k: v["rate"] for k, v in res["false_positive_rate"].items()},
-                                              "far_>0.5mm": far[">0.5mm"]["rate"]}}
+                                              "far_>0.5mm": far[">0.5mm"]["rate"]},
+                                  "fp_rate_by_band": {k: v["rate"] for k, v in res["false_positive_rate_by_band"].items()}}
     for name, res in report["continuous"]["sets"].items():
         a = res["by_kind"]["all"]
         out[f"continuous/{name}"] = {k: a[k] for k in ("motions", "exact_contacts", "missed_by_sphere_trees",

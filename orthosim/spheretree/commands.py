@@ -10,7 +10,10 @@ measures the paper's sphere outside volume and the coverage with `measure_tree`,
 file: per tooth `fdi`, `leaves`, `sov_sum`, `sov_union`, `surface_coverage`, `build_s` (and more),
 and a `summary` (mean, min, max). Sources: a mesh file (STL/OBJ/PLY, used in its own frame), a
 folder of them, an Open-Full-Jaw folder (`tooth_N.stl` + `teeth_axes_*.json`), or a case (.toml);
-the last two give teeth in their local frames, as the simulator uses them.
+the last two give teeth in their local frames, as the simulator uses them. `eval` takes several
+sources at once (both arches of a patient) and reads an Open-Full-Jaw folder's meshes as scanned:
+its figures do not depend on the frame, so it needs no axes file entry per tooth. Open-Full-Jaw
+files are named by Universal number (`tooth_3.stl` is FDI 16): rows carry both numbers.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ class NamedMesh:
     fdi: int | None
     vertices: np.ndarray  # (n, 3) float64, mm
     faces: np.ndarray  # (m, 3) int64
+    universal: int | None = None  # the Universal number an Open-Full-Jaw file is named by
 
 
 def _from_dentition(dent) -> list[NamedMesh]:
@@ -65,11 +69,37 @@ def _fdi_in_name(path: Path, numbering: str | None) -> int | None:
                           "rename the file (e.g. tooth_11.stl) or leave out --numbering to keep the file's name")
 
 
-def load_source(source: Path, numbering: str | None = None) -> list[NamedMesh]:
+def _open_full_jaw_as_scanned(folder: Path) -> list[NamedMesh]:
+    """The `tooth_N.stl` meshes of an Open-Full-Jaw folder in the scan frame, named by FDI number."""
+    from ..fdi import universal_to_fdi
+    from ..meshload import load_tooth_mesh
+
+    out = []
+    for p in sorted(folder.glob("tooth_*.stl")):
+        match = re.fullmatch(r"tooth_(\d+)", p.stem)
+        if not match:
+            continue
+        universal = int(match.group(1))
+        try:
+            fdi = universal_to_fdi(universal)
+        except ValueError:
+            raise SphereTreeError(p, None, f"{universal} is not a Universal tooth number (1-32)",
+                                  "rename the file tooth_N.stl with N in 1-32") from None
+        mesh = load_tooth_mesh(p)
+        out.append(NamedMesh(str(fdi), fdi, np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), universal))
+    return sorted(out, key=lambda m: m.fdi)
+
+
+def _is_open_full_jaw(folder: Path) -> bool:
+    return folder.is_dir() and any(folder.glob("teeth_axes_*.json")) and any(folder.glob("tooth_*.stl"))
+
+
+def load_source(source: Path, numbering: str | None = None, as_scanned: bool = False) -> list[NamedMesh]:
     """The tooth meshes named by `source` (see the module text), in a stable order.
 
     numbering: how to read the tooth number in mesh file names ("fdi" or "universal"); None: the
-    trees keep the files' names. Cases and Open-Full-Jaw folders know their numbering already."""
+    trees keep the files' names. Cases and Open-Full-Jaw folders know their numbering already.
+    as_scanned: an Open-Full-Jaw folder gives its meshes in the scan frame (no arch import)."""
     if not source.exists():
         raise SphereTreeError(source, None, "not found", "give a mesh file, a folder of meshes or a case .toml")
     if source.is_file() and source.suffix.lower() == ".toml":
@@ -83,7 +113,9 @@ def load_source(source: Path, numbering: str | None = None) -> list[NamedMesh]:
             raise SphereTreeError(source, None, f"unsupported file type '{source.suffix}'", "give an STL, OBJ or PLY mesh, a folder, or a case .toml")
         files = [source]
     else:
-        if any(source.glob("teeth_axes_*.json")) and any(source.glob("tooth_*.stl")):
+        if _is_open_full_jaw(source):
+            if as_scanned:
+                return _open_full_jaw_as_scanned(source)
             from ..openfulljaw import load_open_full_jaw
 
             return _from_dentition(load_open_full_jaw(source))
@@ -99,6 +131,15 @@ def load_source(source: Path, numbering: str | None = None) -> list[NamedMesh]:
     if len(set(names)) != len(names):
         raise SphereTreeError(source, None, "two meshes would get the same output name", "give each tooth file a distinct tooth number in its name")
     return out
+
+
+def mean_errors(key: str, values: np.ndarray, stderrs: np.ndarray) -> dict:
+    """Errors of the mean of per-tooth figures: `<key>_sem`, the standard error over the teeth (sample
+    standard deviation / sqrt(n); 0 for one tooth), and `<key>_mean_mc_stderr`, the Monte Carlo error
+    of the mean from the per-tooth standard errors."""
+    n = len(values)
+    sem = float(values.std(ddof=1) / np.sqrt(n)) if n > 1 else 0.0
+    return {f"{key}_sem": sem, f"{key}_mean_mc_stderr": float(np.sqrt((stderrs**2).sum()) / n)}
 
 
 def _progress(items, desc: str, total: int | None = None):
@@ -164,15 +205,16 @@ def build(source: Path, method: str, branching: int, depth: int | None, out_dir:
 
 
 @spheretree.command("eval")
-@click.argument("source", type=click.Path(path_type=Path))
+@click.argument("sources", nargs=-1, required=True, type=click.Path(path_type=Path))
 @_request_options
 @click.option("--out", "out_file", type=click.Path(path_type=Path), required=True, help="Output JSON file.")
 @click.option("--samples", type=int, default=400_000, show_default=True, help="Monte Carlo points in the leaf spheres, per tooth.")
 @click.option("--surface-samples", type=int, default=200_000, show_default=True, help="Surface points for the coverage, per tooth.")
 @click.option("--seed", type=int, default=0, show_default=True)
-def evaluate(source: Path, method: str, branching: int, depth: int | None, out_file: Path, samples: int,
+def evaluate(sources: tuple[Path, ...], method: str, branching: int, depth: int | None, out_file: Path, samples: int,
              surface_samples: int, seed: int, numbering: str | None) -> None:
-    """Build and measure the trees of SOURCE: SOV (summed, union), coverage, build time -> JSON."""
+    """Build and measure the trees of SOURCES (meshes, folders, cases): SOV (summed, union), coverage,
+    build time -> JSON, per tooth and as a mean with its standard error."""
     from ..atomic import write_json
     from .build import build_sphere_tree
     from .measure import measure_tree
@@ -183,14 +225,20 @@ def evaluate(source: Path, method: str, branching: int, depth: int | None, out_f
         raise SphereTreeError("spheretree eval", "--surface-samples", f"{surface_samples} is too few to vouch for coverage", "use at least 100000")
     if samples < 10_000:
         raise SphereTreeError("spheretree eval", "--samples", f"{samples} gives a useless error bar", "use at least 10000")
-    meshes = load_source(source, numbering)
+    meshes = [(source, m) for source in sources for m in load_source(source, numbering, as_scanned=True)]
+    names = [m.name for _, m in meshes]
+    if len(set(names)) != len(names):
+        twice = sorted({n for n in names if names.count(n) > 1})
+        raise SphereTreeError("spheretree eval", "SOURCES", f"tooth {twice[0]} is given twice",
+                              "give each tooth once (e.g. the two arches of one patient)")
     rows = []
-    for m in _progress(meshes, "sphere trees"):
+    for source, m in _progress(meshes, "sphere trees"):
         t0 = time.perf_counter()
         tree = build_sphere_tree((m.vertices, m.faces), method, branching, depth)
         build_s = time.perf_counter() - t0
         rep = measure_tree(tree, m.vertices, m.faces, sphere_samples=samples, n_surface=surface_samples, seed=seed)
-        row = {"fdi": m.fdi, "name": m.name, "faces": len(m.faces), "leaves": rep.leaves,
+        row = {"fdi": m.fdi, "universal": m.universal, "name": m.name, "source": str(source),
+               "faces": len(m.faces), "leaves": rep.leaves,
                "sov_sum": rep.sov_sum, "sov_union": rep.sov_union, "surface_coverage": rep.surface_coverage,
                "build_s": build_s}
         row.update({k: v for k, v in asdict(rep).items() if k not in row})
@@ -202,9 +250,11 @@ def evaluate(source: Path, method: str, branching: int, depth: int | None, out_f
     summary = {
         "teeth": len(rows),
         "sov_sum_mean": float(col("sov_sum").mean()),
+        **mean_errors("sov_sum", col("sov_sum"), col("sov_sum_stderr")),
         "sov_sum_min": float(col("sov_sum").min()),
         "sov_sum_max": float(col("sov_sum").max()),
         "sov_union_mean": float(col("sov_union").mean()),
+        **mean_errors("sov_union", col("sov_union"), col("sov_union_stderr")),
         "sov_union_min": float(col("sov_union").min()),
         "sov_union_max": float(col("sov_union").max()),
         "surface_coverage_min": float(col("surface_coverage").min()),
@@ -217,12 +267,15 @@ def evaluate(source: Path, method: str, branching: int, depth: int | None, out_f
         "build_s_max": float(col("build_s").max()),
     }
     write_json(out_file, {
-        "source": str(source), "method": method, "branching": branching, "depth": depth,
+        "sources": [str(s) for s in sources], "method": method, "branching": branching, "depth": depth,
         "estimator": ("SOV relative to the tooth volume, Monte Carlo: points uniform in each leaf sphere "
                       "(count proportional to its volume); summed = sum_i V_i * share outside the tooth; union = "
-                      "sum_i V_i * mean(outside / number of leaves holding the point); *_stderr: one standard error"),
+                      "sum_i V_i * mean(outside / number of leaves holding the point); *_stderr: one standard error; "
+                      "summary *_sem: standard error of the mean over the teeth (their spread); *_mean_mc_stderr: "
+                      "the Monte Carlo part of the mean's error alone"),
         "teeth": rows, "summary": summary,
     })
     click.echo(f"{len(rows)} teeth, {method} {branching}/{depth}: SOV summed mean {summary['sov_sum_mean']:.3f} "
+               f"+/- {summary['sov_sum_sem']:.3f} "
                f"({summary['sov_sum_min']:.3f}-{summary['sov_sum_max']:.3f}), union mean {summary['sov_union_mean']:.3f}, "
                f"surface coverage min {summary['surface_coverage_min']:.4%}, build {summary['build_s_total']:.1f} s -> {out_file}")

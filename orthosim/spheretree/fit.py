@@ -46,8 +46,14 @@ class FitOptions:
     medial_samples: int = 4000  # faces on which rho is estimated
     lloyd_iterations: int = 12
     reserve: float = 0.0  # share of the leaves first kept back, then spent on splitting the worst ones
-    voxel_mm: float = 0.15  # spacing of the outside-band voxels that score spheres, mm
-    max_voxels: int = 4_000_000  # the spacing grows on huge meshes to keep the grid this small
+    voxel_mm: float = 0.15  # spacing of the outside-band voxels that score spheres, mm, at most
+    # Fine meshes get finer voxels: a leaf of small triangles has a small patch whose cap outside the
+    # tooth is thinner than 0.15 mm, which coarse voxels see only as a few centres (on the real teeth,
+    # 0.18 mm edges, 0.10 mm voxels took the summed SOV from 0.065 to 0.060 at the same build time;
+    # on the parametric teeth, 1 mm edges, they bought nothing and cost 2.6 times the time).
+    voxel_per_edge: float = 0.6  # spacing = this x the median edge length, within [min_voxel_mm, voxel_mm]
+    min_voxel_mm: float = 0.10
+    max_voxels: int = 8_000_000  # the spacing grows on huge meshes to keep the grid this small
     band_mm: float = 0.75  # thickness of the outside band that scores spheres, mm
     fine_band_mm: float = 0.3  # inner part of the band sampled at full resolution, mm
     depths: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0)  # x patch radius
@@ -163,12 +169,20 @@ def _split_with_capacity(points: np.ndarray, k: int, capacity: int, rng, iterati
     return label
 
 
+def voxel_spacing(vertices: np.ndarray, faces: np.ndarray, options: FitOptions) -> float:
+    """Spacing of the scoring voxels for this mesh, mm: `voxel_per_edge` x its median edge length,
+    kept within [min_voxel_mm, voxel_mm]."""
+    tri = vertices[faces]
+    edge = float(np.median(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2)))
+    return float(np.clip(options.voxel_per_edge * edge, options.min_voxel_mm, options.voxel_mm))
+
+
 class _LeafFitter:
     """Scores leaf spheres by the outside-band voxels they hold; fits and re-fits them."""
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, options: FitOptions):
         self.vertices, self.faces, self.options = vertices, faces, options
-        self.band = OutsideBand(vertices, faces, voxel_mm=options.voxel_mm, max_voxels=options.max_voxels,
+        self.band = OutsideBand(vertices, faces, voxel_mm=voxel_spacing(vertices, faces, options), max_voxels=options.max_voxels,
                                 band_mm=options.band_mm, fine_mm=options.fine_band_mm)
         self.voxel = self.band.voxel
         self.count = self.band.count  # outside volume of spheres, (n, 3) and (n,) mm, in fine voxels

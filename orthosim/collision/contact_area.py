@@ -1,0 +1,152 @@
+"""Contact areas on the exact meshes: the triangles of one tooth that touch another, not the spheres.
+
+A discrete sphere-tree query says which leaf spheres of two teeth overlap; a picture that paints
+everything inside those spheres also paints surface that is a leaf sphere's thickness away from
+the other tooth. Here the candidate triangles (those inside the overlapping leaves) are kept only
+when the exact triangle-to-triangle distance to the other tooth's surface is at most the touch
+tolerance, or when the triangle's centroid lies inside the other tooth (teeth pushed into each
+other: the deepest part of an overlap is farther than the tolerance from the other surface yet
+plainly in contact).
+
+The triangle distance is written here (vectorised numpy) because FCL answers one closest pair per
+query, not a distance per triangle. Distances in mm; poses (4, 4) local -> arch frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+from scipy.spatial import cKDTree
+
+from ..spheretree.inside import Solid
+
+TOUCH_TOLERANCE_MM = 0.05  # as near as the model's neighbours are placed to touch (see the README)
+
+
+def _segment_distances(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """(n,) distances between segments p1-q1 and p2-q2, each (n, 3) mm (clamped closest points)."""
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a = np.einsum("ij,ij->i", d1, d1)
+    e = np.einsum("ij,ij->i", d2, d2)
+    f = np.einsum("ij,ij->i", d2, r)
+    c = np.einsum("ij,ij->i", d1, r)
+    b = np.einsum("ij,ij->i", d1, d2)
+    denom = a * e - b * b
+    tiny = 1e-300
+    s = np.where(denom > 1e-12 * np.maximum(a * e, tiny), np.clip((b * f - c * e) / np.maximum(denom, tiny), 0, 1), 0.0)
+    t = (b * s + f) / np.maximum(e, tiny)
+    # t outside [0, 1]: clamp it and recompute s for the clamped t
+    s = np.where(t < 0, np.clip(-c / np.maximum(a, tiny), 0, 1), np.where(t > 1, np.clip((b - c) / np.maximum(a, tiny), 0, 1), s))
+    t = np.clip(t, 0, 1)
+    gap = (p1 + s[:, None] * d1) - (p2 + t[:, None] * d2)
+    return np.sqrt(np.einsum("ij,ij->i", gap, gap))
+
+
+def _edges_cross(tri: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """(n,) whether an edge of each triangle of `tri` passes through the paired triangle of `other`."""
+    v0, e1, e2 = other[:, 0], other[:, 1] - other[:, 0], other[:, 2] - other[:, 0]
+    hit = np.zeros(len(tri), bool)
+    for i in range(3):
+        p, d = tri[:, i], tri[:, (i + 1) % 3] - tri[:, i]
+        h = np.cross(d, e2)
+        det = np.einsum("ij,ij->i", e1, h)
+        ok = np.abs(det) > 1e-15
+        inv = 1.0 / np.where(ok, det, 1.0)
+        s = p - v0
+        u = np.einsum("ij,ij->i", s, h) * inv
+        q = np.cross(s, e1)
+        v = np.einsum("ij,ij->i", d, q) * inv
+        t = np.einsum("ij,ij->i", e2, q) * inv
+        hit |= ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= 0) & (t <= 1)
+    return hit
+
+
+def triangle_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Exact distances between paired triangles a[i], b[i] ((n, 3, 3) mm): 0 where they intersect.
+
+    Two disjoint triangles are nearest at a vertex of one against the other or between two edges;
+    intersecting ones have an edge of one through the other.
+    """
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    n = len(a)
+    if n == 0:
+        return np.zeros(0)
+    best = np.full(n, np.inf)
+    for tri, other in ((a, b), (b, a)):
+        for i in range(3):
+            near = trimesh.triangles.closest_point(other, tri[:, i])
+            best = np.minimum(best, np.linalg.norm(near - tri[:, i], axis=1))
+    for i in range(3):
+        for j in range(3):
+            best = np.minimum(best, _segment_distances(a[:, i], a[:, (i + 1) % 3], b[:, j], b[:, (j + 1) % 3]))
+    best[_edges_cross(a, b) | _edges_cross(b, a)] = 0.0
+    return best
+
+
+class ContactSurface:
+    """One tooth's mesh prepared for contact-area queries (built once per tooth, mm, local frame)."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        self.vertices = np.asarray(vertices, float)
+        self.faces = np.asarray(faces, np.int64)
+        tri = self.vertices[self.faces]
+        self.centroids = tri.mean(axis=1)
+        self.circumradius = np.linalg.norm(tri - self.centroids[:, None, :], axis=2).max(axis=1)  # about the centroid
+        self.kdtree = cKDTree(self.centroids)
+        self._solid: Solid | None = None
+
+    @property
+    def solid(self) -> Solid:
+        if self._solid is None:
+            self._solid = Solid(self.vertices, self.faces)
+        return self._solid
+
+    def faces_touching(self, candidates: np.ndarray, pose: np.ndarray, other: "ContactSurface", other_pose: np.ndarray,
+                       tolerance_mm: float = TOUCH_TOLERANCE_MM) -> np.ndarray:
+        """The candidate faces (indices into this mesh) within `tolerance_mm` of `other`'s surface or
+        inside it, at the given poses: sorted (k,) int64."""
+        candidates = np.unique(np.asarray(candidates, np.int64))
+        if not len(candidates):
+            return candidates
+        to_other = np.linalg.inv(np.asarray(other_pose, float)) @ np.asarray(pose, float)
+        tri = self.vertices[self.faces[candidates]] @ to_other[:3, :3].T + to_other[:3, 3]
+        centre = tri.mean(axis=1)
+        reach = self.circumradius[candidates] + other.circumradius.max() + tolerance_mm
+        lists = other.kdtree.query_ball_point(centre, reach)
+        counts = np.fromiter((len(x) for x in lists), np.int64, len(lists))
+        keep = np.zeros(len(candidates), bool)
+        if counts.sum():
+            mine = np.repeat(np.arange(len(candidates)), counts)
+            theirs = np.concatenate([np.asarray(x, np.int64) for x in lists if len(x)])
+            d = triangle_distances(tri[mine], other.vertices[other.faces[theirs]])
+            keep[np.unique(mine[d <= tolerance_mm])] = True
+        rest = np.flatnonzero(~keep)
+        if len(rest):
+            keep[rest[other.solid.contains(centre[rest])]] = True
+        return candidates[keep]
+
+
+def faces_touching_any(surface: ContactSurface, pose: np.ndarray, candidates: np.ndarray,
+                       others, tolerance_mm: float = TOUCH_TOLERANCE_MM) -> np.ndarray:
+    """The candidate faces that touch any of `others` ((ContactSurface, pose) pairs): sorted indices."""
+    found = [surface.faces_touching(candidates, pose, other, other_pose, tolerance_mm) for other, other_pose in others]
+    return np.unique(np.concatenate(found)) if found else np.zeros(0, np.int64)
+
+
+def faces_in_spheres(surface: ContactSurface, pose: np.ndarray, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """Faces (sorted indices) with all three vertices inside one of the spheres (arch frame, mm): the
+    triangles an overlapping leaf sphere holds, as a tree's leaf holds whole triangles."""
+    pose = np.asarray(pose, float)
+    local = (np.asarray(centers, float).reshape(-1, 3) - pose[:3, 3]) @ pose[:3, :3]
+    radii = np.asarray(radii, float).reshape(-1)
+    if not len(radii):
+        return np.zeros(0, np.int64)
+    lists = surface.kdtree.query_ball_point(local, radii)  # a face inside holds its centroid too
+    counts = np.fromiter((len(x) for x in lists), np.int64, len(lists))
+    if not counts.sum():
+        return np.zeros(0, np.int64)
+    sphere = np.repeat(np.arange(len(radii)), counts)
+    face = np.concatenate([np.asarray(x, np.int64) for x in lists if len(x)])
+    far = np.linalg.norm(surface.vertices[surface.faces[face]] - local[sphere][:, None, :], axis=2).max(axis=1)
+    return np.unique(face[far <= radii[sphere] + 1e-6])  # 1e-6 mm: rounding of the poses
