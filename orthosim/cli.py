@@ -85,6 +85,9 @@ def render_options(f):
                      help="Animation frames per simulation step (positions interpolated between steps).")(f)
     f = click.option("--contact-faces", is_flag=True,
                      help="Also colour the tooth surface inside each contact sphere (as in the paper's Figure 7).")(f)
+    f = click.option("--labels", is_flag=True, help="Write each crown's FDI number on the frames.")(f)
+    f = click.option("--no-overlay", is_flag=True,
+                     help="Bare frames: no case name, detector, day counter or colour legend drawn on them.")(f)
     return f
 
 
@@ -199,7 +202,7 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
         else:
             # the child gets the dentition built here rather than building it again
             steps = child.submit(simulate_case, case, detector, dentition=dent)
-            extra.update(_render_steps(dent, report.collect(steps), extracted, out_dir, render_opts))
+            extra.update(_render_steps(dent, report.collect(steps), extracted, out_dir, render_opts, case, detector))
     extra["occlusion"] = occlusion_summary(dent)  # the initial model's
     extra["occlusion_final"] = occlusion_summary(dent, {n: report.last.poses[n] for n in dent.fdis})
     extra["wall_s"] = time.perf_counter() - started
@@ -210,16 +213,19 @@ def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts:
                f"{metrics['collisions']} collisions, max penetration {metrics['max_penetration_mm']:.3f} mm -> {out_dir}/metrics.json")
 
 
-def _render_steps(dent, records, extracted, out_dir: Path, opts: dict) -> dict:
+def _render_steps(dent, records, extracted, out_dir: Path, opts: dict, case, detector: str) -> dict:
     """Render every simulated step (one frame per step and view) into out_dir/frames."""
     from render.animation import render_run
+    from render.overlay import FrameCaption
     from render.timeline import frames_from_steps
 
+    caption = None if opts.get("no_overlay") else FrameCaption(
+        case.name, detector, case.step_days, case.duration_days, labels=opts.get("labels", False))
     frames = frames_from_steps(records, frozenset(extracted), opts.get("frames_per_step", 1))
     return render_run(dent, frames, out_dir, views=opts.get("views") or ("frontal",), size=opts["size"],
                       gif=opts.get("gif", False), alpha=opts.get("alpha", False),
                       hide_roots=opts.get("hide_roots", False),
-                      color_contact_faces=opts.get("contact_faces", False))
+                      color_contact_faces=opts.get("contact_faces", False), caption=caption)
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:

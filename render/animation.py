@@ -298,12 +298,16 @@ class _Progress:
 
 def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, views: Sequence[str] = ("frontal",),
                size: tuple[int, int] = (640, 480), gif: bool = False, alpha: bool = False, progress: bool = True,
-               hide_roots: bool = False, color_contact_faces: bool = False, png: bool = True, mp4: bool = True) -> dict:
+               hide_roots: bool = False, color_contact_faces: bool = False, png: bool = True, mp4: bool = True,
+               caption=None) -> dict:
     """Render every state in `frames` into out_dir (frames/NNNNN.png, animation.mp4, animation.gif).
 
     `frames` is taken ahead on a thread (`prefetch`); `orthosim run` feeds it the records of a
     simulation running in a child process (`orthosim.background`), so that simulating the next
     steps and drawing this one use both cores instead of taking turns for one GIL.
+
+    `caption` (a `render.overlay.FrameCaption`) draws the shared overlay onto every frame: case,
+    detector, day N of M, the colour legend and, if it asks for them, FDI labels.
 
     Returns {"frames": n, "fps": end-to-end frames per second (render, read back, encode, write),
     "render_fps": ..., "views": [...], "size": [w, h], ...}. The caller records it in metrics.json.
@@ -317,6 +321,11 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
     scene = DentitionScene(dentition, size, hide_roots=hide_roots, color_contact_faces=color_contact_faces)
     sink = FrameSink(out_dir, png=png, mp4=mp4, gif=gif)
     bar = _Progress(progress, total)
+    overlay = None
+    if caption is not None:
+        from .overlay import FrameOverlay
+
+        overlay = FrameOverlay(caption, dentition, size)
     render_s = 0.0
     n = 0
     try:
@@ -327,7 +336,12 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
                 scene.update(state)
                 images = [renderer.render(scene, v) for v in views]
                 render_s += time.perf_counter() - t0
-                sink.add(tile(images))
+                if overlay is not None:
+                    for v, image in zip(views, images):
+                        overlay.label(image, scene.view(v), state)
+                    sink.add(overlay.caption_frame(tile(images), state))
+                else:
+                    sink.add(tile(images))
                 n += 1
                 bar.update(n, n / max(time.perf_counter() - started, 1e-9))
                 interrupted()
@@ -347,5 +361,6 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
         "views": list(views),
         "size": list(size),
         "gl_renderer": gl_renderer,
+        "overlay": None if caption is None else {"labels": caption.labels},
         "outputs": {k: v for k, v in written.items() if k != "frames"},
     }
