@@ -165,6 +165,46 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
                    f"loaded in {1000 * trees['load_s']:.0f} ms")
 
 
+@main.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path), metavar="CASE...|RUN_DIR...")
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Report folder.")
+@click.option("--detector", "detectors", multiple=True, type=click.Choice(["circles", "discrete", "continuous", "exact"]),
+              help="Detector to run each case with (repeatable; default: circles, discrete and continuous).")
+@click.option("--from-runs", is_flag=True, help="The arguments are run folders `orthosim run` wrote: report them, run nothing.")
+@click.option("--pdf", is_flag=True, help="Also print DIR/report.pdf with headless Chromium.")
+@click.option("--render", "render_runs", is_flag=True,
+              help="Draw the runs' frames too (frontal view, DIR/runs/...), so the report can show their frames/s.")
+@click.option("--size", default="480x360", show_default=True, callback=_size, help="Size of each picture WIDTHxHEIGHT.")
+def report(inputs: tuple[Path, ...], out_dir: Path, detectors: tuple[str, ...], from_runs: bool, pdf: bool,
+           render_runs: bool, size) -> None:
+    """Contact-area report: index.html, report.json (and report.pdf) for cases or finished runs."""
+    from render.report.page import build_report
+
+    if from_runs:
+        if detectors:
+            raise click.UsageError("--detector chooses how to run cases; with --from-runs the runs say their detector")
+        run_dirs = list(inputs)
+    else:
+        from .case import load_case
+
+        for path in inputs:
+            load_case(path)  # every case file checked before any run starts
+        run_dirs = []
+        for path in inputs:
+            for det in detectors or ("circles", "discrete", "continuous"):
+                run_dir = out_dir / "runs" / path.stem / det
+                opts = {"no_render": not render_runs, "size": size, "views": ("frontal",), "frames_per_step": 1}
+                _run_case(path, run_dir, det, opts)
+                run_dirs.append(run_dir)
+    if pdf:
+        from render.report.browser import find_chromium
+
+        find_chromium()  # fail before the work, not after it
+    record = build_report(run_dirs, out_dir, pdf=pdf, size=size, progress=lambda text: click.echo(f"report: {text}"))
+    outputs = ", ".join(["index.html", "report.json"] + (["report.pdf"] if pdf else []))
+    click.echo(f"report of {len(record['cases'])} case(s) in {record['build_s']:.1f} s: {out_dir}/ ({outputs})")
+
+
 def _run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> None:
     """Simulate the case (orthosim.movement), draw its steps unless --no-render, write
     out_dir/metrics.json and out_dir/distances.csv.
