@@ -61,28 +61,37 @@ def text_patch(text: str, px: int, fg: tuple = TEXT_COLOR, bg: tuple = PANEL_COL
 
 
 @lru_cache(maxsize=32)
-def legend_patch(px: int, items: tuple = LEGEND) -> np.ndarray:
-    """(h, w, 4) uint8 RGBA: one row per colour (swatch and name) on a translucent panel."""
+def legend_patch(px: int, items: tuple = LEGEND, horizontal: bool = False) -> np.ndarray:
+    """(h, w, 4) uint8 RGBA: each colour (swatch and name) on a translucent panel, one per row, or
+    side by side with `horizontal`."""
     from PIL import Image, ImageDraw
 
     font = _font(px)
     pad, gap = 4, 3
     sw = px  # swatch size
     rows = [font.getbbox(name) for name, _, _ in items]
-    w = pad * 2 + sw + 6 + max(b[2] - b[0] for b in rows)
+    item_w = [sw + 6 + b[2] - b[0] for b in rows]
     row_h = max(sw, max(b[3] - b[1] for b in rows))
-    h = pad * 2 + len(items) * row_h + (len(items) - 1) * gap
+    if horizontal:
+        w = pad * 2 + sum(item_w) + 3 * px * (len(items) - 1) // 2
+        h = pad * 2 + row_h
+    else:
+        w = pad * 2 + max(item_w)
+        h = pad * 2 + len(items) * row_h + (len(items) - 1) * gap
     im = Image.new("RGBA", (w, h), (0, 0, 0, 0))
     d = ImageDraw.Draw(im)
     d.rounded_rectangle((0, 0, w - 1, h - 1), radius=4, fill=PANEL_COLOR)
+    x0 = pad
     for i, ((name, colour, kind), box) in enumerate(zip(items, rows)):
-        y = pad + i * (row_h + gap)
-        sq = (pad, y + (row_h - sw) // 2, pad + sw - 1, y + (row_h - sw) // 2 + sw - 1)
+        y = pad if horizontal else pad + i * (row_h + gap)
+        x = x0 if horizontal else pad
+        x0 += item_w[i] + 3 * px // 2
+        sq = (x, y + (row_h - sw) // 2, x + sw - 1, y + (row_h - sw) // 2 + sw - 1)
         if kind == "ring":
             d.ellipse(sq, outline=(*colour, 255), width=max(2, sw // 6))
         else:
             d.rectangle(sq, fill=(*colour, 255), outline=(255, 255, 255, 160))
-        d.text((pad + sw + 6 - box[0], y + (row_h - (box[3] - box[1])) // 2 - box[1]), name, font=font,
+        d.text((x + sw + 6 - box[0], y + (row_h - (box[3] - box[1])) // 2 - box[1]), name, font=font,
                fill=(*TEXT_COLOR, 255))
     return np.asarray(im)
 
@@ -209,27 +218,29 @@ class FrameOverlay:
         return draw_caption(image, self.caption, state.step, self.font_px)
 
 
-def draw_scale_bar(image: np.ndarray, view, at_depth_of: np.ndarray, length_mm: float = 10.0,
-                   font_px: int | None = None) -> None:
-    """A scale bar of `length_mm` at the bottom right of `image` ((h, w, 3|4) uint8, in place), true
-    at the depth of the point `at_depth_of` ((3,) arch frame, mm): perspective makes a bar exact at
-    one depth only; callers pass the centre of the crowns shown."""
+def draw_scale_bar(image: np.ndarray, view, at_depth_of: np.ndarray, render_size: tuple[int, int],
+                   length_mm: float = 10.0, font_px: int | None = None) -> None:
+    """A scale bar of `length_mm`, its label to its left, at the bottom right of `image` ((h, w,
+    3|4) uint8, in place; the picture drawn at `render_size` (w, h) is its top part). True at the
+    depth of the point `at_depth_of` ((3,) arch frame, mm): perspective makes a bar exact at one
+    depth only; callers pass the centre of the crowns shown."""
     h, w = image.shape[:2]
-    px = font_px or font_px_for((w, h))
+    px = font_px or font_px_for(render_size)
     R = view.pose[:3, :3]
     target = np.asarray(at_depth_of, float)
-    a = view.project(np.stack([target, target + R[:, 0] * length_mm]), (w, h))
+    a = view.project(np.stack([target, target + R[:, 0] * length_mm]), render_size)
     bar_px = max(1, int(round(abs(a[1, 0] - a[0, 0]))))
     label = text_patch(f"{length_mm:g} mm", px)
-    m = max(4, px // 2)
-    x1 = w - m - 2
-    x0 = x1 - bar_px
-    y = h - m - label.shape[0] - 6
     thick = max(2, px // 6)
-    patch = np.zeros((thick + 8, bar_px + 8, 4), np.uint8)
+    tick = label.shape[0] - 4
+    patch = np.zeros((tick + 4, bar_px + 8, 4), np.uint8)
     patch[:, :] = PANEL_COLOR
-    patch[4:4 + thick, 4:4 + bar_px] = (*TEXT_COLOR, 255)
-    patch[0:thick + 8, 4:4 + thick] = (*TEXT_COLOR, 255)
-    patch[0:thick + 8, 4 + bar_px - thick:4 + bar_px] = (*TEXT_COLOR, 255)
-    blend(image, patch, x0 - 4, y - 4)
-    blend(image, label, x1 - label.shape[1], y + thick + 6)
+    mid = (tick + 4) // 2
+    patch[mid - thick // 2:mid - thick // 2 + thick, 4:4 + bar_px] = (*TEXT_COLOR, 255)
+    patch[2:tick + 2, 4:4 + thick] = (*TEXT_COLOR, 255)
+    patch[2:tick + 2, 4 + bar_px - thick:4 + bar_px] = (*TEXT_COLOR, 255)
+    m = max(4, px // 2)
+    y = h - label.shape[0] - 3
+    x = w - m - patch.shape[1]
+    blend(image, patch, x, y + 2)
+    blend(image, label, x - label.shape[1] - 2, y)

@@ -95,6 +95,11 @@ class CasePictures:
         state = FrameState(poses=poses, extracted=frozenset(d.extracted))
         self.scene.update(state)
         image = self.renderer.render(self.scene, view)
+        # a band below the picture for the legend and the scale bar, so they never cover a tooth
+        band_h = 2 * self.font_px + 4
+        band = np.empty((band_h, image.shape[1], image.shape[2]), np.uint8)
+        band[:] = image[0, 0]
+        image = np.concatenate([image, band])
         cam = self.scene.view(view)
         shown = [n for n in d.present if arch_of(n) in cam.arches]
         label_view(image, cam, d.dentition, poses, shown, d.extracted, self.font_px)
@@ -103,10 +108,10 @@ class CasePictures:
         day = _day_text(d, pose_name)
         patch = text_patch(day, self.font_px)
         blend(image, patch, image.shape[1] - patch.shape[1] - m, m)
-        leg = legend_patch(max(9, self.font_px - 2), legend)
-        blend(image, leg, m, image.shape[0] - leg.shape[0] - m)
+        leg = legend_patch(max(9, self.font_px - 2), legend, horizontal=True)
+        blend(image, leg, m, image.shape[0] - leg.shape[0] - 3)
         centre = np.mean([d.dentition.teeth[n].to_world(d.dentition.teeth[n].crown_center, poses[n]) for n in shown], axis=0)
-        draw_scale_bar(image, cam, centre, 10.0, self.font_px)
+        draw_scale_bar(image, cam, centre, self.size, 10.0, self.font_px)
         return image
 
     def contacts(self, pose_name: str, view: str, out: Path) -> Picture:
