@@ -141,8 +141,12 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--no-tree-build", is_flag=True, help="Skip timing the sphere-tree build from nothing.")
 @click.option("--step-days", default=2.0, show_default=True, type=click.FloatRange(min=0.01),
               help="Simulation step for the bench, so the case's teeth keep moving through the measured frames.")
+@click.option("--no-report", is_flag=True, help="Skip timing `orthosim report` of the paper's three cases.")
+@click.option("--report-runs", type=click.Path(path_type=Path), default=Path("out/bench/report-runs"), show_default=True,
+              help="Where the report's runs are made once and kept for later benches.")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
-          no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool) -> None:
+          no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_report: bool,
+          report_runs: Path) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -153,11 +157,16 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
 
     record = run_bench(case, frames=frames, warmup=warmup, size=size, n_markers=markers,
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
-                       step_days=step_days, tree_build=not no_tree_build)
+                       step_days=step_days, tree_build=not no_tree_build, report=not no_report,
+                       report_runs=report_runs)
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
     click.echo(f"fps (median, target {record['target_fps']}): {shown} -> {out_file}")
+    if record.get("report"):
+        r = record["report"]
+        click.echo(f"report of {r['cases']} cases x 3 detectors from existing runs: {r['report_s']:.1f} s "
+                   f"(target {r['target_s']:.0f} s), PDF {r['pdf_s']:.1f} s")
     trees = record.get("spheretree_build")
     if trees:
         click.echo(f"sphere trees of {trees['teeth']} teeth built in {trees['build_s']:.1f} s on {trees['workers']} cores "
