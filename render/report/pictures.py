@@ -115,18 +115,20 @@ class CasePictures:
         return image
 
     def contacts(self, pose_name: str, view: str, out: Path) -> Picture:
-        maps = self.data.contact_areas[pose_name]
-        colors = {n: contact_colors(m.distance_mm) for n, m in maps.items()}
-        image = self._draw(pose_name, view, colors, f"{VIEW_TITLES[view]} | {pose_label(pose_name)}", CONTACT_LEGEND)
-        write_bytes(out, encode_png(image))
-        return Picture(out, "contacts", pose_name, view)
+        """The contact areas of `pose_name` from `view` (the paper's Figure 7), written to `out`."""
+        return self._picture("contacts", self.data.contact_areas[pose_name], contact_colors, CONTACT_LEGEND,
+                             pose_name, view, out)
 
     def distance_map(self, pose_name: str, view: str, out: Path) -> Picture:
-        maps = self.data.inter_arch[pose_name]
-        colors = {n: distance_colors(m.distance_mm) for n, m in maps.items()}
-        image = self._draw(pose_name, view, colors, f"{VIEW_TITLES[view]} | {pose_label(pose_name)}", MAP_LEGEND)
+        """The inter-arch distance map of `pose_name` from `view`, written to `out`."""
+        return self._picture("distance_map", self.data.inter_arch[pose_name], distance_colors, MAP_LEGEND,
+                             pose_name, view, out)
+
+    def _picture(self, kind: str, maps, colouring, legend, pose_name: str, view: str, out: Path) -> Picture:
+        colors = {n: colouring(m.distance_mm) for n, m in maps.items()}
+        image = self._draw(pose_name, view, colors, f"{VIEW_TITLES[view]} | {pose_label(pose_name)}", legend)
         write_bytes(out, encode_png(image))
-        return Picture(out, "distance_map", pose_name, view)
+        return Picture(out, kind, pose_name, view)
 
 
 def pose_label(pose_name: str) -> str:
