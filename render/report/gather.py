@@ -76,6 +76,28 @@ def group_runs(runs: Sequence[RunData]) -> list[list[RunData]]:
     return [sorted(g.values(), key=lambda r: order.get(r.detector, len(order))) for g in groups.values()]
 
 
+def _build(case_file: Path):
+    return load_case(case_file).build_dentition()
+
+
+def build_dentitions(groups: Sequence[Sequence[RunData]]) -> dict:
+    """The teeth of every distinct model among the cases, keyed as `gather_case` looks them up;
+    two or more models are built at once, one process per core (a smooth parametric model is
+    seconds of CPU, the largest share of a report). Call before any GL context exists (fork)."""
+    import multiprocessing
+    import os
+    from concurrent.futures import ProcessPoolExecutor
+
+    todo: dict[str, Path] = {}
+    for g in groups:
+        todo.setdefault(repr(load_case(g[0].case_file).model), g[0].case_file)
+    workers = min(len(todo), os.cpu_count() or 1)
+    if workers < 2:
+        return {key: _build(path) for key, path in todo.items()}
+    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
+        return dict(zip(todo, pool.map(_build, todo.values())))
+
+
 def gather_case(runs: Sequence[RunData], dentitions: dict | None = None, fits: bool = True) -> CaseData:
     """The CaseData of one case's runs (one per detector). `dentitions` caches built teeth by model."""
     first = runs[0]

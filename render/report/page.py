@@ -20,7 +20,7 @@ from orthosim.distancemap import CLASS_NAMES, CONTACT_MM, NEAR_MM, summarize
 from orthosim.spaceanalysis import GAP_THRESHOLD_MM
 
 from . import figures
-from .gather import CaseData, gather_case, group_runs
+from .gather import CaseData, build_dentitions, gather_case, group_runs
 from .pictures import CONTACT_VIEWS, MAP_VIEWS, VIEW_TITLES, CasePictures, pose_label
 from .runs import RunData, read_run
 
@@ -97,7 +97,7 @@ def build_report(runs: Sequence[RunData | str | Path], out_dir: str | Path, *, p
     from ..renderer import Renderer
 
     cases = []
-    dentitions: dict = {}
+    dentitions = build_dentitions(groups)  # before the renderer's GL context: builds in forked processes
     used_slugs: set[str] = set()
     figures.distance_colorbar(img / "distance-colorbar.png")
     with Renderer(size) as renderer:
