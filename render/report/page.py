@@ -33,6 +33,14 @@ def _slug(text: str) -> str:
     return "-".join(p for p in keep.split("-") if p)[:60] or "case"
 
 
+def _shown_path(path: Path) -> str:
+    """`path` relative to the working folder when it lies inside it (a report is read elsewhere)."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
 def case_record(data: CaseData, images: dict) -> dict:
     """Everything the page shows about one case, ready for JSON (mm, degrees, days, per cent)."""
     runs = {}
@@ -62,7 +70,7 @@ def case_record(data: CaseData, images: dict) -> dict:
     first = next(iter(data.runs.values()))
     return {
         "name": data.name,
-        "case_file": str(data.case_file),
+        "case_file": _shown_path(data.case_file),
         "case_sha256": data.case_sha256,
         "extracted": list(data.extracted),
         "duration_days": first.duration_days,
