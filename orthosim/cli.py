@@ -118,6 +118,9 @@ def render_options(f):
     f = click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors and warnings.")(f)
     f = click.option("-v", "--verbose", is_flag=True,
                      help="Print each phase with its time even when the output is not a terminal.")(f)
+    f = click.option("--labels", is_flag=True, help="Write each crown's FDI number on the frames.")(f)
+    f = click.option("--no-overlay", is_flag=True,
+                     help="Bare frames: no case name, detector, day counter or colour legend drawn on them.")(f)
     f = click.option("--contact-faces", is_flag=True,
                      help="Also colour the tooth surface inside each contact sphere (as in the paper's Figure 7).")(f)
     f = click.option("--contact-faces-exact", is_flag=True,
@@ -176,11 +179,14 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--no-startup", is_flag=True, help="Skip timing `orthosim run` from launch to its first step.")
 @click.option("--no-staging", is_flag=True, help="Skip timing the aligner staging planner (shipped staging cases, 28-tooth set-up).")
 @click.option("--no-batch", is_flag=True, help="Skip `orthosim batch` animations per minute with 1 and 2 workers (minutes).")
+@click.option("--no-report", is_flag=True, help="Skip timing `orthosim report` of the paper's three cases.")
+@click.option("--report-runs", type=click.Path(path_type=Path), default=Path("out/bench/report-runs"), show_default=True,
+              help="Where the report's runs are made once and kept for later benches.")
 @click.option("--step-days", default=2.0, show_default=True, type=click.FloatRange(min=0.01),
               help="Simulation step for the bench, so the case's teeth keep moving through the measured frames.")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
           no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool,
-          no_staging: bool, no_batch: bool) -> None:
+          no_staging: bool, no_batch: bool, no_report: bool, report_runs: Path) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -192,7 +198,7 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
     record = run_bench(case, frames=frames, warmup=warmup, size=size, n_markers=markers,
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
                        step_days=step_days, tree_build=not no_tree_build, startup=not no_startup,
-                       staging=not no_staging, batch=not no_batch)
+                       staging=not no_staging, batch=not no_batch, report=not no_report, report_runs=report_runs)
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
@@ -212,6 +218,10 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
         click.echo(f"staging: {big['teeth']} teeth, {big['stages']} stages planned in {big['staging_s']:.1f} s "
                    f"(target {big['target_s']:.0f} s); " + ", ".join(f"{k} {v['staging_s']:.1f} s" for k, v in staged["cases"].items()))
 
+    if record.get("report"):
+        r = record["report"]
+        click.echo(f"report of {r['cases']} cases x 3 detectors from existing runs: {r['report_s']:.1f} s "
+                   f"(target {r['target_s']:.0f} s), PDF {r['pdf_s']:.1f} s")
     b = record.get("batch")
     if b:
         click.echo(f"batch: {b['per_minute_1_worker']:.2f} animations/min with 1 worker, {b['per_minute_2_workers']:.2f} "
@@ -281,6 +291,46 @@ def imgdiff(golden: Path, candidate: Path, diff_path: Path | None, max_level: in
         sys.exit(outcome.exit_code)
 
 
+@main.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path), metavar="CASE...|RUN_DIR...")
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Report folder.")
+@click.option("--detector", "detectors", multiple=True, type=click.Choice(["circles", "discrete", "continuous", "exact"]),
+              help="Detector to run each case with (repeatable; default: circles, discrete and continuous).")
+@click.option("--from-runs", is_flag=True, help="The arguments are run folders `orthosim run` wrote: report them, run nothing.")
+@click.option("--pdf", is_flag=True, help="Also print DIR/report.pdf with headless Chromium.")
+@click.option("--render", "render_runs", is_flag=True,
+              help="Draw the runs' frames too (frontal view, DIR/runs/...), so the report can show their frames/s.")
+@click.option("--size", default="480x360", show_default=True, callback=_size, help="Size of each picture WIDTHxHEIGHT.")
+def report(inputs: tuple[Path, ...], out_dir: Path, detectors: tuple[str, ...], from_runs: bool, pdf: bool,
+           render_runs: bool, size) -> None:
+    """Contact-area report: index.html, report.json (and report.pdf) for cases or finished runs."""
+    from render.report.page import build_report
+
+    if from_runs:
+        if detectors:
+            raise click.UsageError("--detector chooses how to run cases; with --from-runs the runs say their detector")
+        run_dirs = list(inputs)
+    else:
+        from .case import load_case
+
+        for path in inputs:
+            load_case(path)  # every case file checked before any run starts
+        run_dirs = []
+        for path in inputs:
+            for det in detectors or ("circles", "discrete", "continuous"):
+                run_dir = out_dir / "runs" / path.stem / det
+                opts = {"no_render": not render_runs, "size": size, "views": ("frontal",), "frames_per_step": 1}
+                run_case(path, run_dir, det, opts)
+                run_dirs.append(run_dir)
+    if pdf:
+        from render.report.browser import find_chromium
+
+        find_chromium()  # fail before the work, not after it
+    record = build_report(run_dirs, out_dir, pdf=pdf, size=size, progress=lambda text: click.echo(f"report: {text}"))
+    outputs = ", ".join(["index.html", "report.json"] + (["report.pdf"] if pdf else []))
+    click.echo(f"report of {len(record['cases'])} case(s) in {record['build_s']:.1f} s: {out_dir}/ ({outputs})")
+
+
 def run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> dict:
     """One run as `orthosim run` does it, also what each `orthosim batch` worker calls (a
     module-level function, so it pickles by name to worker processes and Dask workers).
@@ -312,6 +362,7 @@ def run_options(detector: str | None, opts: dict) -> RunOptions:
                       size=tuple(get("size", d.size)), gif=get("gif", d.gif), alpha=get("alpha", d.alpha),
                       hide_roots=get("hide_roots", d.hide_roots), contact_faces=get("contact_faces", d.contact_faces),
                       contact_faces_exact=get("contact_faces_exact", d.contact_faces_exact),
+                      labels=get("labels", d.labels), overlay=not get("no_overlay", False),
                       frames_per_step=get("frames_per_step"), seconds=get("seconds"), fps=get("fps", d.fps),
                       split_views=get("split_views", d.split_views), export_scene=get("export_scene"),
                       export_steps=get("export_steps"), simulate_in_process=get("simulate_in_process", False),
@@ -341,16 +392,20 @@ def _run_case(case_path: Path, out_dir: Path, options: RunOptions) -> dict:
 
 
 def _render_steps(dent, records, out_dir: Path, options: RunOptions, *, extracted: frozenset[int], per_step: int,
-                  total: int, progress: bool) -> dict:
-    """Draw every simulated step (`per_step` frames each) into out_dir: frames, animation, split views."""
+                  total: int, progress: bool, case) -> dict:
+    """Draw every simulated step (`per_step` frames each) into out_dir: frames, animation, split views,
+    with the overlay (case, detector, day N of M, legend, FDI labels on request) unless --no-overlay."""
     from render.animation import render_run
+    from render.overlay import FrameCaption
     from render.timeline import frames_from_steps
 
+    caption = FrameCaption(case.name, options.detector, case.step_days, case.duration_days,
+                           labels=options.labels) if options.overlay else None
     frames = frames_from_steps(records, extracted, per_step)
     return render_run(dent, frames, out_dir, views=options.views, size=options.size, gif=options.gif, alpha=options.alpha,
                       hide_roots=options.hide_roots, color_contact_faces=options.contact_faces, fps=options.fps,
                       split_views=options.split_views, total=total, progress=progress,
-                      exact_contact_faces=options.contact_faces_exact)
+                      exact_contact_faces=options.contact_faces_exact, caption=caption)
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:

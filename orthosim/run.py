@@ -60,6 +60,8 @@ class RunOptions:
     hide_roots: bool = False
     contact_faces: bool = False
     contact_faces_exact: bool = False  # colour only the triangles within the touch tolerance (exact)
+    labels: bool = False  # FDI numbers on the crowns in the frames
+    overlay: bool = True  # case, detector, day N of M and the colour legend drawn on the frames
     frames_per_step: int | None = None
     seconds: float | None = None
     fps: int = 30
@@ -266,7 +268,7 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
              shown_dir: str | Path | None = None, summary_to: Callable[[str], None] | None = None) -> dict:
     """Run one case into out_dir (see the module doc); returns the run record (run.json).
 
-    draw(dentition, records, out_dir, options, *, extracted, per_step, total, progress) -> dict:
+    draw(dentition, records, out_dir, options, *, extracted, per_step, total, progress, case) -> dict:
     renders the step records into frames and animations and returns what it measured and wrote;
     None, or options.render False: simulate only.
     shown_dir: the folder the run is meant for, named in run.json and the summary, when out_dir is
@@ -324,7 +326,7 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
                 dent = dent or case.build_dentition()
                 split, where = _Split(child, log, keep), "beside the drawing"
             rendered = draw(dent, split, out_dir, options, extracted=frozenset(case.extractions), per_step=per_step,
-                            total=n_frames, progress=log.bars_shown)
+                            total=n_frames, progress=log.bars_shown, case=case)
             log.phase("simulate", time.perf_counter() - split.simulation_started - rendered.get("encode_s", 0.0),
                       f"{split.steps} steps, {rendered.get('frames', 0)} frames drawn (simulation {where})")
             if "encode_s" in rendered:

@@ -311,7 +311,7 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
                size: tuple[int, int] = (640, 480), gif: bool = False, alpha: bool = False, progress: bool = True,
                hide_roots: bool = False, color_contact_faces: bool = False, png: bool = True, mp4: bool = True,
                fps: int = VIDEO_FPS, split_views: bool = False, total: int | None = None,
-               exact_contact_faces: bool = False) -> dict:
+               exact_contact_faces: bool = False, caption=None) -> dict:
     """Render every state in `frames` into out_dir (frames/NNNNN.png, animation.mp4, animation.gif).
 
     `frames` is taken ahead on a thread (`prefetch`); `orthosim run` feeds it the records of a
@@ -321,6 +321,8 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
     fps: the animation's frames per second. split_views: also write each view's own PNG per frame.
     total: the number of frames, when known (for the progress bar). A state given twice in a row
     (the same object: a step in which nothing moved) is drawn once and its image repeated.
+    `caption` (a `render.overlay.FrameCaption`) draws the shared overlay onto every frame: case,
+    detector, day N of M, the colour legend and, if it asks for them, FDI labels.
 
     Returns {"frames": n, "fps": end-to-end frames per second (render, read back, encode, write),
     "render_fps": ..., "views": [...], "size": [w, h], "encode_s": time to flush the encoders, ...}.
@@ -337,20 +339,31 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
                            exact_contact_faces=exact_contact_faces)
     sink = FrameSink(out_dir, png=png, mp4=mp4, gif=gif, video_fps=fps, split_views=views if split_views else ())
     bar = _Progress(progress, total)
+    overlay = None
+    if caption is not None:
+        from .overlay import FrameOverlay
+
+        overlay = FrameOverlay(caption, dentition, size)
     render_s = 0.0
     n = 0
     try:
         with Renderer(size, alpha=alpha) as renderer, _interrupt_between_frames() as interrupted:
             started = time.perf_counter()
-            previous = images = None
+            previous = images = frame = None
             for state in prefetch(frames):
                 if state is not previous:
                     t0 = time.perf_counter()
                     scene.update(state)
                     images = [renderer.render(scene, v) for v in views]
                     render_s += time.perf_counter() - t0
+                    if overlay is not None:  # labels drawn in place, once per distinct state
+                        for v, image in zip(views, images):
+                            overlay.label(image, scene.view(v), state)
+                        frame = overlay.caption_frame(tile(images), state)
+                    else:
+                        frame = tile(images)
                     previous = state
-                sink.add(tile(images), images if split_views else ())
+                sink.add(frame, images if split_views else ())
                 n += 1
                 bar.update(n, n / max(time.perf_counter() - started, 1e-9))
                 interrupted()
@@ -374,6 +387,7 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
         "gl_renderer": gl_renderer,
         "video_fps": fps,
         "encode_s": encode_s,
+        "overlay": None if caption is None else {"labels": caption.labels},
         # relative to out_dir: a run folder may be written in a staging place and moved (orthosim.outputfolder)
         "outputs": {k: os.path.relpath(v, out_dir) for k, v in written.items() if k != "frames"},
     }

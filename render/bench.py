@@ -182,11 +182,32 @@ def _simulation(case_obj, dentition, detector: str):
     return (MovementModel.build(case_obj, dentition=dentition), simulate, simulate_case), None
 
 
+def _overlay_figures(end_to_end, in_child_process, simulate_case, case_obj, detector, n_states, dentition,
+                     extracted, e2e_off, size) -> dict:
+    """end_to_end again with the frame overlay drawn (caption, day counter, legend; then with FDI
+    labels too), in the same run as `e2e_off`, and the ratio of each to it."""
+    from .overlay import FrameCaption, FrameOverlay
+
+    out = {"without_overlay_fps": e2e_off["fps"]}
+    for name, labels in (("overlay", False), ("overlay_with_labels", True)):
+        caption = FrameCaption(case_obj.name, detector, case_obj.step_days, case_obj.duration_days, labels=labels)
+        overlay = FrameOverlay(caption, dentition, size)
+        with in_child_process(simulate_case, case_obj, detector, n_states - 1, dentition=dentition,
+                              ignore_warnings=True) as records:
+            rec = end_to_end((FrameState.from_step(r, extracted) for r in records), overlay=overlay)
+        out[f"{name}_fps"] = rec["fps"]
+        out[f"{name}_ratio"] = rec["fps"] / e2e_off["fps"] if e2e_off["fps"] else None
+    out["target_ratio"] = 0.95
+    out["meets_target"] = out["overlay_ratio"] is not None and out["overlay_ratio"] >= 0.95
+    return out
+
+
 def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool = True, detector: str = "continuous",
               frames: int = 300, warmup: int = 30, size=(640, 480), n_markers: int = 2000, memory_frames: int = 2000,
               variant_rounds: int = 4, collision_repeats: int = 20, work_dir: str | Path | None = None,
               png: bool = True, frames_per_step: int = 6, step_days: float | None = 2.0,
-              tree_build: bool = True, startup: bool = True, staging: bool = True, batch: bool = False) -> dict:
+              tree_build: bool = True, startup: bool = True, staging: bool = True, batch: bool = False,
+              report: bool = False, report_runs: str | Path | None = None) -> dict:
     """Measure and return the bench record (see the module docstring and the output contract).
 
     The model is `dentition` when given (then nothing is simulated), else the case's (default:
@@ -200,6 +221,8 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     (the record's `frames_with_moving_teeth` says how many did). With `tree_build`, the model's
     sphere trees are also built from nothing (`orthosim.spheretree.bench`, target 10 s). With
     `batch`, animations per minute of `orthosim batch` with 1 and 2 workers (`orthosim.batch.bench`).
+    With `report`, `orthosim report` of the paper's three cases x three detectors is timed from runs in
+    `report_runs` (made there first when missing; `render.report.bench`, target 30 s).
     """
     import tempfile
 
@@ -262,7 +285,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         if i >= warmup:
             render_times.append(time.perf_counter() - t0)
 
-    def end_to_end(state_iter, warm: int = warmup) -> dict:
+    def end_to_end(state_iter, warm: int = warmup, overlay=None) -> dict:
         """Frame-to-frame wall time of the pipeline `render_run` uses: states taken ahead on a
         thread (`prefetch`; from a child process when `state_iter` reads one), scene update,
         render, read back, encode on the sink's threads."""
@@ -273,7 +296,11 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         t_loop = t_prev = time.perf_counter()
         for i, st in enumerate(prefetch(state_iter)):
             scene.update(st)
-            sink.add(renderer.render(scene, "frontal"))
+            image = renderer.render(scene, "frontal")
+            if overlay is not None:  # as render_run draws it (render.overlay)
+                overlay.label(image, scene.view("frontal"), st)
+                image = overlay.caption_frame(image, st)
+            sink.add(image)
             now = time.perf_counter()
             if i >= warm:
                 times.append(now - t_prev)
@@ -307,6 +334,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     e2e_sim = None
     e2e_interp = None
     e2e_thread = None
+    e2e_overlay = None
     collision = None
     if case_obj is not None and simulate:
         sim, why = _simulation(case_obj, dentition, detector)
@@ -332,6 +360,8 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
                 e2e_sim = end_to_end(FrameState.from_step(rec, extracted) for rec in records)
             e2e_sim["includes"] = [f"{sim_steps} in a child process (orthosim.background), records sent "
                                    "through a bounded queue", "scene update", "draw", "colour read-back", *encode]
+            e2e_overlay = _overlay_figures(end_to_end, in_child_process, simulate_case, case_obj, detector, n_states,
+                                           dentition, extracted, e2e_sim, size)
             # the same with the simulation on a thread of this process (`prefetch` alone, the
             # pipeline before the child process): what the process buys, measured in this run
             e2e_thread = end_to_end(FrameState.from_step(rec, extracted)
@@ -418,6 +448,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         "end_to_end_synthetic": e2e_synthetic,
         "end_to_end_interpolated": e2e_interp,
         "end_to_end_simulation_on_thread": e2e_thread,
+        "end_to_end_overlay": e2e_overlay,
         "collision_us_per_step": None if collision is None else collision.get("collision_us_per_step"),
         "collision_fps": None if collision is None else {
             k: (1e6 / v if v else None) for k, v in collision.get("collision_us_per_step", {}).items()},
@@ -437,4 +468,10 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
                       "long_run_frames": memory_frames, "long_run_fps": long_fps},
         "wall_s": time.perf_counter() - t_start,
     }
+    if report:  # the paper's three cases x three detectors, from runs made (or kept) beforehand
+        from .report.bench import report_timings
+
+        record["report"] = report_timings(report_runs)
+        record["report_s"] = record["report"]["report_s"]
+        record["meets_target"]["report"] = record["report"]["meets_target"]
     return record

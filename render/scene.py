@@ -353,6 +353,26 @@ class DentitionScene:
             self.buffer_versions[d.primitive] = self.buffer_versions.get(d.primitive, 0) + 1
 
 
+def paint_crowns(scene: DentitionScene, colors: dict[int, np.ndarray]) -> None:
+    """Colour the crown vertices of the teeth in `colors` (FDI -> (k, 3) linear RGB in [0, 1], one
+    row per vertex of `Tooth.crown_vertices`, in that order); other teeth get their base colours.
+
+    For pictures that colour the surface by a per-vertex figure (the distance map, contact areas).
+    The crown part is the first block of a tooth's drawn vertices (see `_split_by_part`), in the
+    same sorted order as `Tooth.crown_vertices`."""
+    for fdi, d in scene.teeth.items():
+        c = colors.get(fdi)
+        if c is None and not d.painted:
+            continue
+        out = d.base_colors.copy()
+        if c is not None:
+            c = np.asarray(c, np.float32)
+            out[:len(c), :3] = c
+        d.primitive.color_0 = out
+        d.painted = c is not None
+        scene.buffer_versions[d.primitive] = scene.buffer_versions.get(d.primitive, 0) + 1
+
+
 def _look_along(direction) -> np.ndarray:
     """Pose whose -z axis points along `direction` (pyrender lights shine along their -z)."""
     z = -np.asarray(direction, float)

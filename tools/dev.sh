@@ -10,10 +10,12 @@ action="${1:-demo}"; shift || true
 
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 
-# System packages, installed only when missing: OSMesa (offscreen GL; no PyPI wheel ships it)
-# and, on a stock Debian python3, the venv module.
+# System packages, installed only when missing: OSMesa (offscreen GL; no PyPI wheel ships it),
+# Chromium and, on a stock Debian python3, the venv module.
 need=()
 dpkg -s libosmesa6 >/dev/null 2>&1 || need+=(libosmesa6)
+# headless Chromium prints `orthosim report --pdf` and is the browser the report tests load the page in
+command -v chromium >/dev/null 2>&1 || need+=(chromium)
 python3 -c 'import ensurepip, venv' >/dev/null 2>&1 || need+=(python3-venv)
 if [ "${#need[@]}" -gt 0 ]; then
     echo "dev.sh: installing system packages: ${need[*]}"
