@@ -37,7 +37,10 @@ from .meshload import CEJ_RULE, MeshRepairWarning, ToothAxes, load_tooth_mesh, p
 from .scanframe import ORIGIN_RULE, place_scan
 
 _TOOTH_FILE = re.compile(r"^tooth_(\d+)\.stl$", re.IGNORECASE)
-ARCH_FOLDERS = ("maxilla", "mandible")  # the dataset's names for a patient's two arch folders
+ARCH_FOLDERS = ("maxilla", "mandible")
+# A mesh longer than this times its next-widest extent has a principal axis to trust as long axis
+# (patient 26: 1.6-2.0 for premolars and molars with roots, 1.25-1.3 for the squat third molars).
+LONG_AXIS_MIN_RATIO = 1.45  # the dataset's names for a patient's two arch folders
 
 
 class AxesEstimatedWarning(UserWarning):
@@ -161,8 +164,17 @@ def _estimated_axes(n: int, mesh, given: dict[int, ToothAxes], meshes) -> tuple[
         axis = -axis
     neighbour = min(arch, key=lambda m: np.linalg.norm(meshes[m].center_mass - mesh.center_mass))
     tilt = float(np.degrees(np.arccos(np.clip(axis @ given[neighbour].long_axis, -1.0, 1.0))))
-    note = (f"principal long axis, {tilt:.0f} degrees from neighbour {neighbour}'s; "
-            f"labial direction of {neighbour}")
+    spread = np.sort(np.ptp((mesh.vertices - centre) @ np.linalg.svd(mesh.vertices - centre, full_matrices=False)[2].T,
+                            axis=0))
+    if spread[-1] < LONG_AXIS_MIN_RATIO * spread[-2]:
+        # A squat tooth (a short-rooted third molar: 14 x 11 x 10 mm) has no clear principal axis;
+        # its neighbour's long axis is the better guess.
+        axis = np.asarray(given[neighbour].long_axis, float)
+        note = (f"no clear principal axis ({spread[-1]:.1f} x {spread[-2]:.1f} mm), so long axis and "
+                f"labial direction of neighbour {neighbour}")
+    else:
+        note = (f"principal long axis, {tilt:.0f} degrees from neighbour {neighbour}'s; "
+                f"labial direction of {neighbour}")
     return ToothAxes(long_axis=axis, labial=np.asarray(given[neighbour].labial, float), point=centre), note
 
 

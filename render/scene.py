@@ -25,6 +25,7 @@ from orthosim.dentition import Dentition
 from orthosim.fdi import Arch, arch_of
 from orthosim.tooth import CROWN, ROOT
 
+from .cej import split_at_cej
 from .cameras import VIEW_NAMES, CameraView, check_view, frame_view
 from .frame_state import FrameState
 from .gl import load_pyrender
@@ -58,16 +59,16 @@ def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: boo
     only the colour changes there. Returns positions (n, 3) float32 mm, normals (n, 3) float32,
     colours (n, 4) float32, indices (m, 3) uint32.
     """
-    normals = mesh.vertex_normals
+    vertices, normals, all_faces, face_part = split_at_cej(mesh, face_part)  # a smooth CEJ line, not a staircase
     parts = [CROWN] if hide_roots else [CROWN, ROOT]
     pos, nrm, col, idx = [], [], [], []
     offset = 0
     for part in parts:
-        faces = mesh.faces[face_part == part]
+        faces = all_faces[face_part == part]
         if not len(faces):
             continue
         used, inverse = np.unique(faces.reshape(-1), return_inverse=True)
-        pos.append(mesh.vertices[used])
+        pos.append(vertices[used])
         nrm.append(normals[used])
         colour = CROWN_COLOR if part == CROWN else ROOT_COLOR
         col.append(np.tile([*colour, 1.0], (len(used), 1)))
