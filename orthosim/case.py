@@ -90,6 +90,7 @@ class Simulation:
     restitution: float = 0.5  # Newton's coefficient (0..1) of the reported impacts
     resistance_rule: str = "literature"  # centre of resistance: "literature" or "paper"
     resistance_fraction: float = 0.4  # literature rule: share (1/3..1/2) of the embedded root below the crest
+    occlusal_slide_mm: float = 0.05  # how much deeper teeth of the two arches in contact may sink while sliding
 
 
 @dataclass(frozen=True)
@@ -212,7 +213,7 @@ _MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files"
 FRAMES = ("arch", "scan")
 _TREATMENT = ("extractions", "duration_days", "step_days", "detector")
 _WIRE = ("type",)
-_SIMULATION = ("force_share", "restitution", "resistance_rule", "resistance_fraction")
+_SIMULATION = ("force_share", "restitution", "resistance_rule", "resistance_fraction", "occlusal_slide_mm")
 RESISTANCE_RULES = ("literature", "paper")
 _LOAD = ("teeth", "force_cN", "direction", "point", "moment_cNmm", "moment_axis", "movement")
 
@@ -280,7 +281,10 @@ def _read_simulation(r: _Reader) -> Simulation:
     fraction = r.number("resistance_fraction", 0.4)
     if not (1.0 / 3.0 - 1e-9 <= fraction <= 0.5 + 1e-9):
         r.fail("resistance_fraction", f"{fraction:g} is outside 1/3 to 1/2", "use a value between 0.333 and 0.5")
-    return Simulation(share, restitution, rule, fraction)
+    slide = r.number("occlusal_slide_mm", 0.05)
+    if slide > 3.0:
+        r.fail("occlusal_slide_mm", f"{slide:g} mm is more than a cusp's height", "use a value from 0 to 3 mm")
+    return Simulation(share, restitution, rule, fraction, slide)
 
 
 def _read_model(path: Path, r: _Reader) -> ModelSpec:

@@ -99,3 +99,21 @@ def _signed_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
     closest, distance, face = trimesh.proximity.closest_point(mesh, points)
     inside = np.einsum("ij,ij->i", closest - points, mesh.face_normals[face]) > 0.0
     return np.where(inside, distance, -distance)
+
+
+def occlusion_record(dent: Dentition, contacts: list[OcclusalContact] | None = None) -> dict:
+    """The occlusal measures of a dentition at rest, ready for JSON: overjet, overbite, molar relation
+    (mm), Bolton ratios (%), and the facing pairs in contact with their areas."""
+    from .fdi import QUADRANTS
+    from .metrics import occlusion_summary
+    from .occlusion import bolton_ratios
+
+    contacts = occlusal_contacts(dent) if contacts is None else contacts
+    complete = all(10 * q + p in dent.teeth for q in QUADRANTS for p in range(1, 7))
+    return {
+        **(occlusion_summary(dent) or {}),
+        "bolton_percent": bolton_ratios(dent) if complete else None,
+        "contact_band_mm": CONTACT_BAND_MM,
+        "contacts": [c.summary() for c in contacts if c.in_contact],
+        "rest_interpenetration_mm": dent.info.get("rest_interpenetration_mm", {}),
+    }

@@ -39,7 +39,7 @@ from .scanframe import ORIGIN_RULE, place_scan
 _TOOTH_FILE = re.compile(r"^tooth_(\d+)\.stl$", re.IGNORECASE)
 ARCH_FOLDERS = ("maxilla", "mandible")
 # A mesh longer than this times its next-widest extent has a principal axis to trust as long axis
-# (patient 26: 1.6-2.0 for premolars and molars with roots, 1.25-1.3 for the squat third molars).
+# (patient 26: 1.55-2.4 for the teeth with axes, 1.26-1.28 for the squat lower third molars).
 LONG_AXIS_MIN_RATIO = 1.45  # the dataset's names for a patient's two arch folders
 
 

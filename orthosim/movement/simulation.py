@@ -84,7 +84,8 @@ class MovementSettings:
         if sim is None:
             return cls()
         return cls(force_share=sim.force_share, restitution=sim.restitution,
-                   resistance_rule=sim.resistance_rule, resistance_fraction=sim.resistance_fraction)
+                   resistance_rule=sim.resistance_rule, resistance_fraction=sim.resistance_fraction,
+                   occlusal_slide_mm=getattr(sim, "occlusal_slide_mm", cls.occlusal_slide_mm))
 
 
 @dataclass(frozen=True, eq=False)
