@@ -18,7 +18,8 @@ Each step (the paper's frame) of `step_days`:
    the rest state) is tested only when the move takes the two into each other: for arch
    neighbours, when the exact meshes come closer or sink deeper; for facing teeth (the occlusal
    rule: cusps in contact may slide along each other), only when the exact meshes end the step
-   interpenetrating deeper than at its start by more than `occlusal_slide_mm`. Continuous: every mover is cut back to its
+   interpenetrating deeper than at rest (step 0) by more than `occlusal_slide_mm`.
+   Continuous: every mover is cut back to its
    earliest time of first contact (refined on the exact meshes to `contact_tolerance_mm`), so the
    teeth stop just touching; cutting one tooth may put it in another's way, so detection repeats
    on the cut motions (a few rounds). Discrete detectors (bounding circles, discrete sphere trees,
@@ -65,7 +66,7 @@ class MovementSettings:
     rounds: continuous detector: detection rounds on cut motions per step.
     occlusal_slide_mm: continuous detector: teeth of the two arches in contact at a step's start may
         slide along each other; the move stops only if it leaves them interpenetrating deeper than
-        at the start by more than this (mm). Arch neighbours get `contact_tolerance_mm`.
+        at rest (step 0) by more than this (mm). Arch neighbours get `contact_tolerance_mm`.
     """
 
     force_share: float = 0.5
@@ -504,9 +505,11 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
             facing = pair in model.facing
             if d1 > 0.0:
                 return not facing and d1 < d0 - 1e-6
+            if facing:  # sliding cusps: bounded against the rest state, so steps cannot add up
+                return _depth(model, end, pair, sink_memo) - initial_depths.get(pair, 0.0) > s.occlusal_slide_mm
             start = _depth(model, P, pair, sink_memo) if d0 <= 0.0 else 0.0
             deeper = _depth(model, end, pair, sink_memo) - start
-            return deeper > (s.occlusal_slide_mm if facing else (1e-6 if d0 > 0.0 else s.contact_tolerance_mm))
+            return deeper > (1e-6 if d0 > 0.0 else s.contact_tolerance_mm)
 
         def tested(current: dict[int, Motion], skip: set) -> list[tuple[int, int]]:
             out = []
