@@ -16,7 +16,7 @@ from orthosim.movement.simulation import _exact_distance
 CASES = Path(__file__).resolve().parent.parent / "cases"
 
 
-@lru_cache(maxsize=1)
+@lru_cache(maxsize=3)
 def _run(name):
     model = MovementModel.build(load_case(CASES / name))
     report = RunReport(model, "continuous")
@@ -31,22 +31,22 @@ def _moved(metrics, teeth):
 
 @pytest.mark.real_data
 def test_real_case1_first_molars_and_second_premolars_move_into_the_space_canines_and_incisors_stay():
-    _, m, _ = _run("open_full_jaw_case1_first_premolar_extraction.toml")
+    model, m, _ = _run("open_full_jaw_case1_first_premolar_extraction.toml")
     assert min(_moved(m, (16, 26, 36, 46)).values()) > 0.5, _moved(m, (16, 26, 36, 46))
     assert min(_moved(m, (15, 25, 35, 45)).values()) > 0.2, _moved(m, (15, 25, 35, 45))
     stayers = _moved(m, (13, 12, 11, 21, 22, 23, 33, 32, 31, 41, 42, 43))
     assert max(stayers.values()) < 0.05, stayers
-    assert m["max_penetration_mm"] < 0.06
+    assert m["max_penetration_mm"] <= model.settings.occlusal_slide_mm + 0.01  # cusps slid, none sank further
 
 
 @pytest.mark.real_data
 def test_real_case2_first_molars_and_first_premolars_move_canines_and_lateral_incisors_stay():
-    _, m, _ = _run("open_full_jaw_case2_second_premolar_extraction.toml")
+    model, m, _ = _run("open_full_jaw_case2_second_premolar_extraction.toml")
     movers = _moved(m, (16, 14, 26, 24, 36, 34, 46, 44))
     assert min(movers.values()) > 0.3, movers
     stayers = _moved(m, (13, 12, 23, 22, 33, 32, 43, 42))
     assert max(stayers.values()) < 0.05, stayers
-    assert m["max_penetration_mm"] < 0.06
+    assert m["max_penetration_mm"] <= model.settings.occlusal_slide_mm + 0.01
 
 
 @pytest.mark.real_data
