@@ -555,6 +555,14 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                 for n, t in cut.items():
                     P1[n] = interpolate_pose(P[n], P1[n], t)
                     tcut[n] *= t
+            # The sliding allowance was checked at the intended end of each move; a move cut short
+            # by another contact may stop mid-way over a cusp, deeper than its end would be: such a
+            # tooth keeps its start pose, so the bound holds on the poses a step leaves.
+            for pair in touching_set:
+                if pair in model.facing and any(P1[n] is not P[n] for n in pair) and \
+                        _depth(model, P1, pair, sink_memo) - initial_depths.get(pair, 0.0) > s.occlusal_slide_mm:
+                    for n in pair:
+                        P1[n] = P[n]
         else:
             pairs = tested(motions, set())
             tested_pairs.update(pairs)
