@@ -43,10 +43,12 @@ class ModelSpec:
     kind: str = "parametric"
     resolution: str | int = "smooth"  # parametric: ring points or a preset name
     third_molars: bool = False  # parametric
-    diastema_mm: float = 0.0  # parametric: space between the central incisors, both arches
-    folder: Path | None = None  # meshes / open-full-jaw
-    files: dict[str, int] = field(default_factory=dict)  # meshes: file name -> FDI
+    diastema_mm: float = 0.0  # space opened between the central incisors, both arches (any kind)
+    folder: Path | None = None  # meshes / open-full-jaw (open-full-jaw: the first of `folders`)
+    files: dict[str, int] = field(default_factory=dict)  # meshes: file name (may name a subfolder) -> FDI
     scale: float = 1.0  # meshes: multiply coordinates (e.g. 1000 for metres)
+    folders: tuple[Path, ...] = ()  # open-full-jaw: the scan's folders (maxilla, mandible), one transform
+    frame: str = "arch"  # meshes: "arch" (already in the arch frame) or "scan" (fit one rigid transform)
 
     def present_teeth(self) -> set[int]:
         """FDI numbers the model will have, known without loading any mesh."""
@@ -56,7 +58,7 @@ class ModelSpec:
         if self.kind == "meshes":
             return set(self.files.values())
         present = set()
-        for path in self.folder.glob("tooth_*.stl"):
+        for path in (p for f in (self.folders or (self.folder,)) for p in f.glob("tooth_*.stl")):
             try:
                 present.add(F.universal_to_fdi(int(path.stem.split("_", 1)[1])))
             except ValueError:
@@ -88,6 +90,7 @@ class Simulation:
     restitution: float = 0.5  # Newton's coefficient (0..1) of the reported impacts
     resistance_rule: str = "literature"  # centre of resistance: "literature" or "paper"
     resistance_fraction: float = 0.4  # literature rule: share (1/3..1/2) of the embedded root below the crest
+    occlusal_slide_mm: float = 0.05  # how much deeper teeth of the two arches in contact may sink while sliding
 
 
 @dataclass(frozen=True)
@@ -136,8 +139,14 @@ class Case:
 
         m = self.model
         if m.kind == "meshes":
-            return meshload.load_mesh_folder(m.folder, m.files, scale=m.scale)
-        return meshload.load_open_full_jaw(m.folder)
+            dent = meshload.load_mesh_folder(m.folder, m.files, scale=m.scale, frame=m.frame)
+        else:
+            dent = meshload.load_open_full_jaw(list(m.folders) or m.folder)
+        if m.diastema_mm:
+            from .dentition import open_midline_space
+
+            dent = open_midline_space(dent, m.diastema_mm)
+        return dent
 
     def dentition_is_cached(self) -> bool:
         """Whether `build_dentition` will load the teeth from the disk cache rather than build them."""
@@ -224,10 +233,11 @@ def _ranges(teeth: set[int]) -> str:
 
 _TOP = ("case", "model", "treatment", "wire", "loads", "simulation", "start", "target")
 _CASE = ("name", "description")
-_MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files", "scale")
+_MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files", "scale", "frame")
+FRAMES = ("arch", "scan")
 _TREATMENT = ("extractions", "duration_days", "step_days", "detector")
 _WIRE = ("type",)
-_SIMULATION = ("force_share", "restitution", "resistance_rule", "resistance_fraction")
+_SIMULATION = ("force_share", "restitution", "resistance_rule", "resistance_fraction", "occlusal_slide_mm")
 RESISTANCE_RULES = ("literature", "paper")
 _LOAD = ("teeth", "force_cN", "direction", "point", "moment_cNmm", "moment_axis", "movement")
 
@@ -298,13 +308,16 @@ def _read_simulation(r: _Reader) -> Simulation:
     fraction = r.number("resistance_fraction", 0.4)
     if not (1.0 / 3.0 - 1e-9 <= fraction <= 0.5 + 1e-9):
         r.fail("resistance_fraction", f"{fraction:g} is outside 1/3 to 1/2", "use a value between 0.333 and 0.5")
-    return Simulation(share, restitution, rule, fraction)
+    slide = r.number("occlusal_slide_mm", 0.05)
+    if slide > 3.0:
+        r.fail("occlusal_slide_mm", f"{slide:g} mm is more than a cusp's height", "use a value from 0 to 3 mm")
+    return Simulation(share, restitution, rule, fraction, slide)
 
 
 def _read_model(path: Path, r: _Reader) -> ModelSpec:
     kind = r.string("kind", "parametric", MODEL_KINDS)
     if kind == "parametric":
-        for key in ("folder", "files", "scale"):
+        for key in ("folder", "files", "scale", "frame"):
             if key in r.table:
                 r.fail(key, "applies only to mesh models", "remove it, or set kind = \"meshes\"")
         resolution = r.get("resolution", "smooth")
@@ -317,16 +330,29 @@ def _read_model(path: Path, r: _Reader) -> ModelSpec:
             r.fail("resolution", f"must be a preset name or an even number >= 6, got {resolution!r}", "use e.g. \"smooth\" or 40")
         return ModelSpec(kind, resolution, r.boolean("third_molars", False), r.number("diastema_mm", 0.0))
 
-    for key in ("resolution", "third_molars", "diastema_mm"):
+    for key in ("resolution", "third_molars"):
         if key in r.table:
             r.fail(key, "applies only to the parametric model", "remove it, or set kind = \"parametric\"")
-    folder_raw = r.string("folder")
-    folder = Path(folder_raw).expanduser()
-    if not folder.is_absolute():
-        folder = (path.parent / folder).resolve()  # relative to the case file, so cases travel with their data
-    if not folder.is_dir():
-        r.fail("folder", f"no such folder {folder}", "give a folder of tooth meshes, relative to the case file or absolute")
+    diastema = r.number("diastema_mm", 0.0)
+    folder_raw = r.get("folder")
+    many = isinstance(folder_raw, list) and kind == "open-full-jaw"
+    if many and (not folder_raw or not all(isinstance(f, str) for f in folder_raw)):
+        r.fail("folder", f"must be a folder or a list of folders, got {folder_raw!r}", 'write e.g. ["maxilla", "mandible"]')
+    folders = []
+    for i, raw in enumerate(folder_raw if many else [r.string("folder")]):
+        key = f"folder[{i}]" if many else "folder"
+        folder = Path(raw).expanduser()
+        if not folder.is_absolute():
+            folder = (path.parent / folder).resolve()  # relative to the case file, so cases travel with their data
+        folder = _shared_data_fallback(raw, folder)
+        if not folder.is_dir():
+            r.fail(key, f"no such folder {folder}", "give a folder of tooth meshes, relative to the case file or absolute")
+        folders.append(folder)
+    folder = folders[0]
     files: dict[str, int] = {}
+    frame = r.string("frame", "arch", FRAMES) if kind == "meshes" else "arch"
+    if kind != "meshes" and "frame" in r.table:
+        r.fail("frame", "applies only to kind = \"meshes\" (open-full-jaw folders are always a scan frame)", "remove it")
     if kind == "meshes":
         raw_files = r.get("files")
         if not isinstance(raw_files, dict) or not raw_files:
@@ -341,9 +367,31 @@ def _read_model(path: Path, r: _Reader) -> ModelSpec:
             r.fail("files", "two files map to the same tooth", "give each FDI number once")
     elif "files" in r.table:
         r.fail("files", "not used by open-full-jaw folders (tooth_N.stl names the tooth)", "remove it")
-    elif not any(folder.glob("tooth_*.stl")):
-        r.fail("folder", f"no tooth_N.stl files in {folder}", "point it at an Open-Full-Jaw maxilla or mandible folder")
-    return ModelSpec(kind, folder=folder, files=files, scale=r.number("scale", 1.0, positive=True))
+    else:
+        from .openfulljaw import scan_folders
+
+        if not many:
+            folders = scan_folders(folder)  # a patient folder stands for its maxilla/ and mandible/
+        for i, f in enumerate(folders):
+            if not any(f.glob("tooth_*.stl")):
+                r.fail(f"folder[{i}]" if many else "folder", f"no tooth_N.stl files in {f}",
+                       "point it at an Open-Full-Jaw maxilla or mandible folder, or the patient folder holding both")
+    return ModelSpec(kind, diastema_mm=diastema, folder=folder, files=files, scale=r.number("scale", 1.0, positive=True),
+                     folders=tuple(folders) if kind == "open-full-jaw" else (), frame=frame)
+
+
+def _shared_data_fallback(raw: str, folder: Path) -> Path:
+    """A folder written as `.../shared/data/<name>` that is not there is looked up in the shared data
+    folder (`orthosim.shareddata`: $ORTHOSIM_SHARED_DATA), so a shipped case also runs from a clone
+    or worktree that does not sit beside `shared/`."""
+    marker = "shared/data/"
+    text = raw.replace("\\", "/")
+    if folder.is_dir() or marker not in text:
+        return folder
+    from .shareddata import shared_data_dir
+
+    other = shared_data_dir() / text.split(marker, 1)[1]
+    return other.resolve() if other.is_dir() else folder
 
 
 def _read_load(path: Path, i: int, raw: Any, present: set[int], extracted: set[int], wire: Wire) -> Load:

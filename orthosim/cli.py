@@ -153,6 +153,31 @@ def demo(out_dir: Path, **render_opts) -> None:
 
 
 @main.command()
+@click.argument("case", type=click.Path(path_type=Path))
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=None,
+              help="Output folder (default: out/<case name>-occlusion).")
+@click.option("--size", default="800x600", show_default=True, callback=_size, help="Image size WIDTHxHEIGHT.")
+@click.option("--no-render", is_flag=True, help="Write occlusion.json only.")
+def occlusion(case: Path, out_dir: Path | None, size, no_render: bool) -> None:
+    """Occlusal measures and contacts per pair of a case's model at rest; contact areas drawn (Figure 7)."""
+    from .atomic import write_json
+    from .case import load_case
+    from .occlusalcontacts import occlusal_contacts, occlusion_record
+
+    dent = load_case(case).build_dentition()
+    out_dir = out_dir or Path("out") / f"{case.stem}-occlusion"
+    contacts = occlusal_contacts(dent)
+    record = occlusion_record(dent, contacts)
+    write_json(out_dir / "occlusion.json", record)
+    if not no_render:
+        from render.occlusion_figure import write_occlusal_contacts
+
+        write_occlusal_contacts(dent, contacts, out_dir, size)
+    click.echo(f"{len(record['contacts'])} facing pairs in contact; overjet {record.get('overjet_mm', float('nan')):.2f} mm, "
+               f"overbite {record.get('overbite_mm', float('nan')):.2f} mm -> {out_dir}")
+
+
+@main.command()
 @click.argument("cases", nargs=-1, required=True, type=click.Path(path_type=Path))
 def check(cases: tuple[Path, ...]) -> None:
     """Validate case files without running them."""

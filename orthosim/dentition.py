@@ -6,11 +6,11 @@ Arch frame (the paper's): origin mid-arch, y up, the x-z plane the occlusal plan
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .fdi import Arch, arch_order
+from .fdi import Arch, arch_order, side
 from .tooth import Tooth
 
 
@@ -53,3 +53,21 @@ class Dentition:
             out[n] = t.to_world(t.crown_center, None if poses is None else poses[n])
         return out
 
+
+
+def open_midline_space(dent: Dentition, space_mm: float) -> Dentition:
+    """The dentition with a space (a diastema) of `space_mm` opened between the central incisors of both arches.
+
+    Each side of the mouth moves away from the midline by half the space, rigidly and along the
+    arch frame's x axis (patient's right to -x, left to +x), so each side keeps its own occlusion
+    and contacts; only the teeth across the midline part. Real teeth get the parametric model's
+    `diastema_mm` this way.
+    """
+    teeth = {}
+    for n, t in dent.teeth.items():
+        pose = t.rest_pose.copy()
+        pose[0, 3] += side(n) * 0.5 * space_mm
+        teeth[n] = replace(t, rest_pose=pose)
+    info = {**dent.info, "diastema_mm": space_mm,
+            "diastema_rule": "each side moved rigidly along x by half the space, away from the midline"}
+    return Dentition(teeth, f"{dent.description}, {space_mm:g} mm midline space opened", info)

@@ -12,6 +12,10 @@ check the model rather than restate the numbers it was built from.
   - Bolton: lower over upper sum of mesiodistal crown widths, overall (first molar to first molar,
     12 teeth) and anterior (canine to canine, 6 teeth), widths measured along each tooth's mesial
     axis on its mesh.
+Real (scanned) molars carry no landmarks; theirs are found on the crown (`molar_landmark`): the
+mesiobuccal cusp tip is the most occlusal crown vertex mesial and buccal of the crown's middle;
+the buccal groove is the lowest point of the buccal cusp ridge between the mesiobuccal cusp and
+the next buccal cusp distal of it. Occlusal contacts per pair are in `orthosim.occlusalcontacts`.
 """
 
 from __future__ import annotations
@@ -69,13 +73,48 @@ def molar_relation(dent: Dentition, poses: Poses | None = None) -> float:
         if u not in dent.teeth or l not in dent.teeth:
             continue
         tu, tl = dent.teeth[u], dent.teeth[l]
-        if "mb_cusp" not in tu.landmarks or "buccal_groove" not in tl.landmarks:
-            continue
-        cusp = tu.to_world(tu.landmarks["mb_cusp"], None if poses is None else poses[u])
-        groove = tl.to_world(tl.landmarks["buccal_groove"], None if poses is None else poses[l])
+        cusp = tu.to_world(molar_landmark(tu, "mb_cusp"), None if poses is None else poses[u])
+        groove = tl.to_world(molar_landmark(tl, "buccal_groove"), None if poses is None else poses[l])
         mesial = _horizontal_direction(dent, l, tl.mesial, poses)
         values.append((cusp - groove) @ mesial)
     return float(np.mean(values)) if values else float("nan")
+
+
+def molar_landmark(tooth, name: str) -> np.ndarray:
+    """(3,) mm, local: the tooth's landmark `name` ("mb_cusp" or "buccal_groove"), from its model
+    when it has one, else found on its crown (see the module docstring)."""
+    if name in tooth.landmarks:
+        return tooth.landmarks[name]
+    crown = tooth.crown_vertices
+    along = crown @ tooth.mesial  # mm toward the midline
+    buccal = crown[:, 2]
+    middle = 0.5 * (along.max() + along.min())
+    outer = buccal > np.median(buccal)
+    if name == "mb_cusp":
+        pick = np.flatnonzero(outer & (along > middle))
+        return crown[pick[np.argmax(crown[pick, 1])]].copy()
+    if name != "buccal_groove":
+        raise KeyError(name)
+    # the buccal cusp ridge: the most occlusal buccal vertex in each 0.25 mm slice along the tooth
+    edges = np.arange(along[outer].min(), along[outer].max() + 0.25, 0.25)
+    slot = np.digitize(along[outer], edges)
+    ridge = np.full(len(edges) + 1, -np.inf)
+    np.maximum.at(ridge, slot, crown[outer, 1])
+    centre = np.append(edges - 0.125, edges[-1] + 0.125)
+    valid = np.isfinite(ridge)
+    mesial_half = valid & (centre > middle)
+    mb = int(np.flatnonzero(mesial_half)[np.argmax(ridge[mesial_half])])
+    width = along.max() - along.min()
+    distal = valid & (centre < centre[mb] - 0.2 * width) & (centre > centre[mb] - 0.6 * width)
+    point = np.zeros(3)
+    groove = mb
+    if distal.any():
+        db = int(np.flatnonzero(distal)[np.argmax(ridge[distal])])
+        between = np.flatnonzero(valid[db:mb + 1]) + db
+        groove = int(between[np.argmin(ridge[between])])
+    point[0] = centre[groove] * tooth.mesial[0]  # back from "toward the midline" to local x
+    point[1], point[2] = ridge[groove], buccal.max()
+    return point
 
 
 def mesiodistal_width(dent: Dentition, fdi: int) -> float:

@@ -6,17 +6,16 @@ end points `x`, `y`, `z` of three unit axes from `c`. Measured on Patient 26: `z
 the root toward the crown (the mesh reaches 4-6 mm beyond `c` along it and 12-18 mm behind), `y - c`
 is labial/buccal, and `x - c` points DISTALLY on every tooth although the dataset describes it as
 mesial; so only `z` and `y` are used (the local x axis is y cross z per `orthosim.tooth`) and the
-sense of `x` found is recorded in `info`. The whole jaw is moved into the arch frame
-(`orthosim.dentition`) by ONE rigid transform, so the teeth keep their true relative positions:
-  y  normal of the plane fitted (SVD) through the crown centres (each the centroid of the tooth's
-     part coronal of its estimated CEJ, as every report uses), signed so upper long axes
-     (apex -> crown) point to -y and lower ones to +y;
-  z  in that plane, from the centroid of the crown centres toward the midpoint of the central
-     incisors (the nearest-to-midline pair present on both sides), i.e. anterior;
-  x  = y cross z, which must put the patient's right teeth at negative x (checked: a mirrored
-     scan or a wrong numbering raises `MeshError`; the importer never mirrors);
-  origin: x and z at the centroid of the crown centres (on the midline by construction of z),
-     y = 0 at the mean of the teeth's occlusal-most points (lowest upper / highest lower vertex).
+sense of `x` found is recorded in `info`.
+
+Several folders of one scan (`maxilla/` and `mandible/`, or the patient folder holding both) load
+as one model: they share the scan frame, so ONE rigid transform (`orthosim.scanframe`) maps all
+their teeth and the scanned bite is kept exactly. A mesh without an axes entry (the dataset's lower
+third molars) gets axes estimated from its shape, with a one-line `AxesEstimatedWarning` naming
+it: the long axis is the mesh's principal axis (`meshload.principal_long_axis`) signed like the
+given long axes of its arch, the labial direction its nearest neighbour's with axes. Teeth with
+estimated axes do not enter the frame fit. Teeth that interpenetrate in the scan (segmentation
+touches) are measured per pair and reported (`orthosim.interpenetration`).
 Each tooth's CEJ is estimated as in `orthosim.meshload.CEJ_RULE`.
 """
 
@@ -25,44 +24,76 @@ from __future__ import annotations
 import json
 import re
 import warnings
-from dataclasses import replace
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
 from . import fdi as fdi_mod
 from .dentition import Dentition
 from .errors import MeshError
-from .fdi import Arch
-from .meshload import CEJ_RULE, MeshRepairWarning, ToothAxes, load_tooth_mesh, tooth_from_mesh
+from .interpenetration import report_rest_interpenetration
+from .meshload import CEJ_RULE, MeshRepairWarning, ToothAxes, load_tooth_mesh, principal_long_axis
+from .scanframe import ORIGIN_RULE, place_scan
 
 _TOOTH_FILE = re.compile(r"^tooth_(\d+)\.stl$", re.IGNORECASE)
+ARCH_FOLDERS = ("maxilla", "mandible")
+# A mesh longer than this times its next-widest extent has a principal axis to trust as long axis
+# (patient 26: 1.55-2.4 for the teeth with axes, 1.26-1.28 for the squat lower third molars).
+LONG_AXIS_MIN_RATIO = 1.45  # the dataset's names for a patient's two arch folders
 
-ORIGIN_RULE = (
-    "x, z: centroid of the crown centres projected into their best-fit plane; "
-    "y = 0: mean of the teeth's occlusal-most vertices (min y upper, max y lower)"
-)
+
+class AxesEstimatedWarning(UserWarning):
+    """A tooth mesh had no axes entry; its axes were estimated from the mesh (the message names it)."""
 
 
-def load_open_full_jaw(folder: str | Path) -> Dentition:
-    """A `Dentition` in the arch frame from an Open-Full-Jaw folder (`tooth_N.stl` + `teeth_axes_*.json`).
+def scan_folders(folder: str | Path | Sequence[str | Path]) -> list[Path]:
+    """The folders of one scan: `folder` itself, each of a list, or a patient folder's `maxilla/` and `mandible/`."""
+    if isinstance(folder, (str, Path)):
+        folder = Path(folder)
+        if folder.is_dir() and not any(_TOOTH_FILE.match(p.name) for p in folder.iterdir()):
+            arches = [folder / a for a in ARCH_FOLDERS if (folder / a).is_dir()]
+            if arches:
+                return arches
+        return [folder]
+    folders = [Path(f) for f in folder]
+    if not folders:
+        raise MeshError("open-full-jaw", "folders", "is empty", "list the scan's maxilla and/or mandible folders")
+    return folders
 
-    `info` records the source folder, `scan_to_arch` (4x4 rigid transform, scan frame -> arch
-    frame, mm), the origin and CEJ rules, the Universal -> FDI numbering used and the measured
-    sense of the json `x` axes.
+
+def load_open_full_jaw(folder: str | Path | Sequence[str | Path]) -> Dentition:
+    """A `Dentition` in the arch frame from Open-Full-Jaw folders of one scan (`tooth_N.stl` + `teeth_axes_*.json`).
+
+    `folder`: one folder, a list of folders of the same scan, or a patient folder holding
+    `maxilla/` and `mandible/`. `info` records the source folders, `scan_to_arch` (4x4 rigid
+    transform, scan frame -> arch frame, mm), the origin and CEJ rules, the Universal -> FDI
+    numbering used, the teeth whose axes were estimated, the measured sense of the json `x` axes
+    and the scan's interpenetrating pairs (`rest_interpenetration_mm`).
     """
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise MeshError(folder, None, "folder not found", "check the path to the Open-Full-Jaw folder")
+    folders = scan_folders(folder)
+    where = folders[0] if len(folders) == 1 else " + ".join(str(f) for f in folders)
     files: dict[int, Path] = {}
-    for path in sorted(folder.iterdir()):
-        match = _TOOTH_FILE.match(path.name)
-        if match:
-            files[int(match.group(1))] = path
+    axes_raw: dict = {}
+    axes_file_of: dict[str, Path] = {}
+    for f in folders:
+        if not f.is_dir():
+            raise MeshError(f, None, "folder not found", "check the path to the Open-Full-Jaw folder")
+        for path in sorted(f.iterdir()):
+            match = _TOOTH_FILE.match(path.name)
+            if match:
+                universal = int(match.group(1))
+                if universal in files:
+                    raise MeshError(path, None, f"tooth {universal} is also in {files[universal]}",
+                                    "give each tooth once across the scan's folders")
+                files[universal] = path
+        raw, axes_file = _read_axes(f)
+        for key, entry in raw.items():
+            axes_raw[key] = entry
+            axes_file_of[key] = axes_file
     if len(files) < 3:
-        raise MeshError(folder, None, f"holds {len(files)} tooth_N.stl files; the arch frame needs at least 3 teeth",
+        raise MeshError(where, None, f"holds {len(files)} tooth_N.stl files; the arch frame needs at least 3 teeth",
                         "point to an Open-Full-Jaw maxilla or mandible folder")
-    axes_raw, axes_file = _read_axes(folder)
 
     fdi_of: dict[int, int] = {}
     for universal in files:
@@ -71,104 +102,80 @@ def load_open_full_jaw(folder: str | Path) -> Dentition:
         except ValueError:
             raise MeshError(files[universal], None, f"{universal} is not a Universal tooth number (1-32)",
                             "rename the file tooth_N.stl with N in 1-32") from None
-        if str(universal) not in axes_raw:
-            raise MeshError(axes_file, str(universal), f"no axes for {files[universal].name}",
-                            "add the tooth's c, x, y, z entry or remove the mesh")
 
-    centre, long_axis, labial, x_end = {}, {}, {}, {}
-    meshes = {}
+    axes: dict[int, ToothAxes] = {}
+    x_end, meshes = {}, {}
     for universal, path in files.items():
         n = fdi_of[universal]
-        c, xe, ye, ze = (_point(axes_raw, axes_file, universal, key) for key in ("c", "x", "y", "z"))
         meshes[n] = load_tooth_mesh(path)
-        centre[n], x_end[n] = c, xe - c
-        long_axis[n] = _unit(ze - c, axes_file, f"{universal}.z")
-        labial[n] = _unit(ye - c, axes_file, f"{universal}.y")
+        if str(universal) not in axes_raw:
+            continue
+        axes_file = axes_file_of[str(universal)]
+        c, xe, ye, ze = (_point(axes_raw, axes_file, universal, key) for key in ("c", "x", "y", "z"))
+        x_end[n] = xe - c
+        long_axis = _unit(ze - c, axes_file, f"{universal}.z")
         # The dataset's z points root -> crown; a flipped entry would put the root on top, so
         # check it against the mesh: the crown centre is nearer the crown end than the apex.
-        along = (meshes[n].vertices - c) @ long_axis[n]
+        along = (meshes[n].vertices - c) @ long_axis
         if along.max() > -along.min():
             warnings.warn(f"{axes_file}: {universal}.z points toward the root of {path.name}; reversed it",
                           MeshRepairWarning, stacklevel=2)
-            long_axis[n] = -long_axis[n]
+            long_axis = -long_axis
+        axes[n] = ToothAxes(long_axis=long_axis, labial=_unit(ye - c, axes_file, f"{universal}.y"), point=c)
+    given = set(axes)
+    if len(given) < 3:
+        raise MeshError(where, None, f"only {len(given)} teeth have an axes entry; the arch frame needs at least 3",
+                        "restore the dataset's teeth_axes_*.json")
+    for universal, path in files.items():
+        n = fdi_of[universal]
+        if n not in axes:
+            axes[n], note = _estimated_axes(n, meshes[n], axes, meshes)
+            warnings.warn(f"{path}: no axes entry for Universal {universal} (FDI {n}, {fdi_mod.name(n)}); "
+                          f"estimated from the mesh ({note})", AxesEstimatedWarning, stacklevel=2)
 
-    order = sorted(meshes)
     path_of = {fdi_of[u]: p for u, p in files.items()}
-    # Build each tooth in the scan frame first: its crown centre (the centroid of the part coronal
-    # of the estimated CEJ) is what the arch frame is fitted to, the same centre every report uses.
-    in_scan = {n: tooth_from_mesh(n, meshes[n], ToothAxes(long_axis=long_axis[n], labial=labial[n], point=centre[n]),
-                                  source=str(path_of[n])) for n in order}
-    crown_centre = {n: t.to_world(t.crown_center) for n, t in in_scan.items()}
-    scan_to_arch = _scan_to_arch(folder, order, crown_centre, long_axis, meshes)
+    teeth, scan_to_arch = place_scan(where, meshes, axes, {n: str(p) for n, p in path_of.items()}, fit_teeth=given)
     R = scan_to_arch[:3, :3]
-
-    teeth = {}
     x_sense = {"mesial": 0, "distal": 0}
-    for n in order:
-        tooth = replace(in_scan[n], rest_pose=scan_to_arch @ in_scan[n].rest_pose)
-        teeth[n] = tooth
-        mesial_arch = tooth.rest_pose[:3, :3] @ tooth.mesial
+    for n in sorted(x_end):
+        mesial_arch = teeth[n].rest_pose[:3, :3] @ teeth[n].mesial
         x_sense["mesial" if (R @ x_end[n]) @ mesial_arch > 0 else "distal"] += 1
 
-    info = {
-        "source": str(folder),
-        "axes_file": str(axes_file),
+    dentition = Dentition(teeth, f"Open-Full-Jaw teeth from {where}", {
+        "source": str(folders[0]) if len(folders) == 1 else [str(f) for f in folders],
+        "axes_file": sorted({str(p) for p in axes_file_of.values()}),
         "scan_to_arch": scan_to_arch,
         "origin_rule": ORIGIN_RULE,
         "cej_rule": CEJ_RULE,
         "universal_to_fdi": dict(sorted(fdi_of.items())),
+        "axes_estimated": sorted(set(teeth) - given),
         "json_axes": "z - c: apex -> crown (long axis); y - c: labial; x - c: unused (local x = y cross z)",
         "json_x_sense": x_sense,
-    }
-    return Dentition(teeth, f"Open-Full-Jaw teeth from {folder}", info)
+    })
+    return report_rest_interpenetration(dentition, where)
 
 
-def _scan_to_arch(folder, order, centre, long_axis, meshes) -> np.ndarray:
-    """The one rigid 4x4 transform scan frame -> arch frame for the whole jaw (see the module docstring)."""
-    C = np.array([centre[n] for n in order])
-    centroid = C.mean(axis=0)
-    _, s, vt = np.linalg.svd(C - centroid)
-    if s[1] < 1e-3 * s[0]:
-        raise MeshError(folder, "c", "the crown centres lie on a line, so no occlusal plane can be fitted",
-                        "check the axes file")
-    y = vt[2]
-    # Upper long axes should point to -y and lower ones to +y: sign the normal by their sum.
-    toward_occlusal = sum((1.0 if fdi_mod.arch_of(n) is Arch.UPPER else -1.0) * long_axis[n] for n in order)
-    if toward_occlusal @ y > 0:
-        y = -y
-
-    mid = None
-    for pos in (1, 2, 3):
-        pairs = [(10 + pos, 20 + pos), (40 + pos, 30 + pos)]
-        found = [(centre[a] + centre[b]) / 2 for a, b in pairs if a in centre and b in centre]
-        if found:
-            mid = np.mean(found, axis=0)
-            break
-    if mid is None:
-        raise MeshError(folder, None, "no incisor or canine pair on both sides of the midline, so the anterior "
-                        "direction is unknown", "the importer needs e.g. both central incisors (11 and 21)")
-    z = mid - centroid
-    z -= y * (z @ y)
-    if np.linalg.norm(z) < 1.0:
-        raise MeshError(folder, "c", "the incisors sit at the centroid of the crown centres", "check the axes file")
-    z /= np.linalg.norm(z)
-    x = np.cross(y, z)
-
-    T = np.eye(4)
-    T[:3, :3] = np.array([x, y, z])  # rows: arch axes in scan coordinates, so R @ p gives arch coords
-    T[:3, 3] = -T[:3, :3] @ centroid
-    occlusal = []
-    for n in order:
-        ys = meshes[n].vertices @ T[1, :3] + T[1, 3]
-        occlusal.append(ys.min() if fdi_mod.arch_of(n) is Arch.UPPER else ys.max())
-    T[1, 3] -= float(np.mean(occlusal))
-
-    right = [(T[:3, :3] @ centre[n])[0] for n in order if fdi_mod.side(n) < 0]
-    left = [(T[:3, :3] @ centre[n])[0] for n in order if fdi_mod.side(n) > 0]
-    if right and left and not np.mean(right) < np.mean(left):
-        raise MeshError(folder, None, "the patient's right teeth come out on the left: the scan is mirrored or "
-                        "the tooth numbering is swapped", "check the Universal numbers of the tooth_N.stl files")
-    return T
+def _estimated_axes(n: int, mesh, given: dict[int, ToothAxes], meshes) -> tuple[ToothAxes, str]:
+    """Axes of a tooth without an entry, in the scan frame, from its mesh and its arch's given axes."""
+    arch = [m for m in given if fdi_mod.arch_of(m) is fdi_mod.arch_of(n)] or list(given)
+    axis, centre = principal_long_axis(mesh)
+    arch_up = sum(np.asarray(given[m].long_axis, float) for m in arch)
+    if axis @ arch_up < 0:
+        axis = -axis
+    neighbour = min(arch, key=lambda m: np.linalg.norm(meshes[m].center_mass - mesh.center_mass))
+    tilt = float(np.degrees(np.arccos(np.clip(axis @ given[neighbour].long_axis, -1.0, 1.0))))
+    spread = np.sort(np.ptp((mesh.vertices - centre) @ np.linalg.svd(mesh.vertices - centre, full_matrices=False)[2].T,
+                            axis=0))
+    if spread[-1] < LONG_AXIS_MIN_RATIO * spread[-2]:
+        # A squat tooth (a short-rooted third molar: 14 x 11 x 10 mm) has no clear principal axis;
+        # its neighbour's long axis is the better guess.
+        axis = np.asarray(given[neighbour].long_axis, float)
+        note = (f"no clear principal axis ({spread[-1]:.1f} x {spread[-2]:.1f} mm), so long axis and "
+                f"labial direction of neighbour {neighbour}")
+    else:
+        note = (f"principal long axis, {tilt:.0f} degrees from neighbour {neighbour}'s; "
+                f"labial direction of {neighbour}")
+    return ToothAxes(long_axis=axis, labial=np.asarray(given[neighbour].labial, float), point=centre), note
 
 
 def _read_axes(folder: Path) -> tuple[dict, Path]:

@@ -25,6 +25,7 @@ from orthosim.dentition import Dentition
 from orthosim.fdi import Arch, arch_of
 from orthosim.tooth import CROWN, ROOT
 
+from .cej import split_at_cej
 from .cameras import VIEW_NAMES, CameraView, check_view, frame_view
 from .frame_state import FrameState
 from .gl import load_pyrender
@@ -55,23 +56,30 @@ def _drawn_parts(hide_roots: bool) -> list:
     return [CROWN] if hide_roots else [CROWN, ROOT]
 
 
-def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: bool):
+def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: bool, smooth_cej: bool = True):
     """Vertices duplicated along the CEJ so crown and root faces get their own colour.
+
+    smooth_cej: triangles straddling the CEJ plane are cut along it (`render.cej`); off where a
+    picture colours the mesh face for face or crown vertex for vertex (exact contact faces,
+    `paint_crowns`), which need the model's own faces and vertices in their order.
 
     Normals are the full mesh's smooth vertex normals, so the shading runs on across the seam and
     only the colour changes there. Returns positions (n, 3) float32 mm, normals (n, 3) float32,
     colours (n, 4) float32, indices (m, 3) uint32.
     """
-    normals = mesh.vertex_normals
+    if smooth_cej:  # a smooth CEJ line, not a staircase; new vertices, so no face-for-face correspondence
+        vertices, normals, all_faces, face_part = split_at_cej(mesh, face_part)
+    else:
+        vertices, normals, all_faces = mesh.vertices, mesh.vertex_normals, np.asarray(mesh.faces)
     parts = _drawn_parts(hide_roots)
     pos, nrm, col, idx = [], [], [], []
     offset = 0
     for part in parts:
-        faces = mesh.faces[face_part == part]
+        faces = all_faces[face_part == part]
         if not len(faces):
             continue
         used, inverse = np.unique(faces.reshape(-1), return_inverse=True)
-        pos.append(mesh.vertices[used])
+        pos.append(vertices[used])
         nrm.append(normals[used])
         colour = CROWN_COLOR if part == CROWN else ROOT_COLOR
         col.append(np.tile([*colour, 1.0], (len(used), 1)))
@@ -84,10 +92,10 @@ def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: boo
 class _ToothDrawable:
     """One tooth's node, primitive and the data needed to recolour it."""
 
-    def __init__(self, pyrender, fdi: int, tooth, hide_roots: bool, keep_kdtree: bool):
+    def __init__(self, pyrender, fdi: int, tooth, hide_roots: bool, keep_kdtree: bool, smooth_cej: bool = True):
         self.fdi = fdi
         self.arch = arch_of(fdi)
-        pos, nrm, col, idx = _split_by_part(tooth.mesh, tooth.face_part, hide_roots)
+        pos, nrm, col, idx = _split_by_part(tooth.mesh, tooth.face_part, hide_roots, smooth_cej)
         self.base_colors = col  # (n_vertices, 4) float32
         self.material = pyrender.MetallicRoughnessMaterial(
             baseColorFactor=[1.0, 1.0, 1.0, 1.0], metallicFactor=0.0, roughnessFactor=ENAMEL_ROUGHNESS,
@@ -122,7 +130,8 @@ class DentitionScene:
     def __init__(self, dentition: Dentition, size: tuple[int, int] = (640, 480), *, hide_roots: bool = False,
                  color_contact_faces: bool = False, exact_contact_faces: bool = False, show_markers: bool = True,
                  marker_style: str = "sprite",
-                 marker_subdivisions: int = 1, frame_points: np.ndarray | None = None, unique_markers: bool = True):
+                 marker_subdivisions: int = 1, frame_points: np.ndarray | None = None, unique_markers: bool = True,
+                 smooth_cej: bool = True):
         """`marker_style`: "sprite" draws each contact sphere as a ray-cast point sprite (cheap at
         thousands of markers); "mesh" as an instanced icosphere (80 triangles at the default
         `marker_subdivisions`). `show_markers=False` with `color_contact_faces=True` shows contacts
@@ -145,7 +154,8 @@ class DentitionScene:
 
         self.teeth: dict[int, _ToothDrawable] = {}
         for fdi in dentition.fdis:
-            d = _ToothDrawable(pyrender, fdi, dentition.teeth[fdi], hide_roots, self.color_contact_faces)
+            d = _ToothDrawable(pyrender, fdi, dentition.teeth[fdi], hide_roots, self.color_contact_faces,
+                               smooth_cej and not exact_contact_faces)
             self.teeth[fdi] = d
             self.scene.add_node(d.node)
 

@@ -151,7 +151,20 @@ def test_real_teeth_case_names_the_open_full_jaw_folder():
     path = CASES / "open_full_jaw_patient26.toml"
     case = load_case(path)
     assert case.model.kind == "open-full-jaw"
-    assert case.model.present_teeth() == {18, 17, 16, 15, 14, 13, 12, 11, 21, 22, 23, 24, 25, 26, 27}
+    upper = {18, 17, 16, 15, 14, 13, 12, 11, 21, 22, 23, 24, 25, 26, 27}
+    assert case.model.present_teeth() == upper | {10 * q + p for q in (3, 4) for p in range(1, 9)}  # the full jaw
+    assert case.loads  # with a treatment that moves teeth
+
+
+@pytest.mark.real_data
+@pytest.mark.parametrize("name", ["case1_first_premolar_extraction", "case2_second_premolar_extraction", "case3_diastema"])
+def test_the_papers_cases_on_real_teeth_load_with_their_extractions_and_loads(name):
+    case = load_case(CASES / f"open_full_jaw_{name}.toml")
+    assert case.model.kind == "open-full-jaw" and len(case.model.folders) == 2
+    assert case.loads
+    assert case.extractions == {"case1_first_premolar_extraction": (14, 24, 34, 44),
+                                "case2_second_premolar_extraction": (15, 25, 35, 45), "case3_diastema": ()}[name]
+    assert case.model.diastema_mm == (2.0 if name == "case3_diastema" else 0.0)
 
 
 # --- [simulation] table (movement parameters) ---------------------------------------------------

@@ -13,8 +13,13 @@ Each step (the paper's frame) of `step_days`:
    its intended pose at the end of the step. Between the step's ends a tooth moves as
    `collision.motion.interpolate_pose` says, the motion the continuous detector sweeps.
 3. Collisions: pairs of teeth that may meet (arch neighbours skipping extracted teeth; facing teeth
-   of the other arch only for teeth moving vertically, since occlusal contacts stop vertical
-   movement) are tested with the chosen detector. Continuous: every mover is cut back to its
+   of the other arch, for a tooth moving in any direction) are tested with the chosen detector.
+   A pair already in contact at the step's start (touching, or interpenetrating as a scan left it:
+   the rest state) is tested only when the move takes the two into each other: for arch
+   neighbours, when the exact meshes come closer or sink deeper; for facing teeth (the occlusal
+   rule: cusps in contact may slide along each other), only when the exact meshes end the step
+   interpenetrating deeper than at rest (step 0) by more than `occlusal_slide_mm`.
+   Continuous: every mover is cut back to its
    earliest time of first contact (refined on the exact meshes to `contact_tolerance_mm`), so the
    teeth stop just touching; cutting one tooth may put it in another's way, so detection repeats
    on the cut motions (a few rounds). Discrete detectors (bounding circles, discrete sphere trees,
@@ -59,6 +64,9 @@ class MovementSettings:
     contact_tolerance_mm: continuous detector: teeth stop within this travel (mm) of touching.
     touch_tolerance_mm: exact and continuous detectors: meshes this close (mm) count as touching.
     rounds: continuous detector: detection rounds on cut motions per step.
+    occlusal_slide_mm: continuous detector: teeth of the two arches in contact at a step's start may
+        slide along each other; the move stops only if it leaves them interpenetrating deeper than
+        at rest (step 0) by more than this (mm). Arch neighbours get `contact_tolerance_mm`.
     """
 
     force_share: float = 0.5
@@ -69,6 +77,7 @@ class MovementSettings:
     contact_tolerance_mm: float = 0.02
     touch_tolerance_mm: float = 0.05
     rounds: int = 4
+    occlusal_slide_mm: float = 0.05
 
     @classmethod
     def from_case(cls, case: Case) -> "MovementSettings":
@@ -76,7 +85,8 @@ class MovementSettings:
         if sim is None:
             return cls()
         return cls(force_share=sim.force_share, restitution=sim.restitution,
-                   resistance_rule=sim.resistance_rule, resistance_fraction=sim.resistance_fraction)
+                   resistance_rule=sim.resistance_rule, resistance_fraction=sim.resistance_fraction,
+                   occlusal_slide_mm=getattr(sim, "occlusal_slide_mm", cls.occlusal_slide_mm))
 
 
 @dataclass(frozen=True, eq=False)
@@ -336,11 +346,17 @@ def _at_fault(model, pair, motions, dt, centers) -> tuple[int, ...]:
     return out or pair
 
 
-def _vertical_mover(m: Motion | None, point: np.ndarray, dt: float) -> bool:
-    if m is None:
-        return False
-    d = m.displacement(point, dt)[0]
-    return abs(d[1]) > 0.5 * np.hypot(d[0], d[2])
+def _depth(model: MovementModel, P, pair, known: dict) -> float:
+    """mm the pair's exact meshes interpenetrate at poses P (0 when apart), through the run's memo."""
+    a, b = pair
+    key = (pair, np.asarray(P[a]).tobytes(), np.asarray(P[b]).tobytes())
+    if key not in known:
+        if len(known) > 4096:
+            known.clear()
+        hit, _ = exact.collide(*_fcl_pair(model, P, pair))
+        ta, tb = model.dentition.teeth[a], model.dentition.teeth[b]
+        known[key] = exact.penetration_depth(ta.mesh, P[a], tb.mesh, P[b]) if hit else 0.0
+    return known[key]
 
 
 def _touching(model: MovementModel, detector: str, P: dict[int, np.ndarray], distances: exact.DistanceMemo | None = None):
@@ -455,6 +471,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
     touching, leaves = _touching(model, detector, P, distances)
     dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
     depth_memo: dict = {}
+    sink_memo: dict = {}  # (pair, pose bytes) -> mm: depths the sliding rule asks for
     initial_depths = penetrations(model, P, depth_memo)
     yield StepRecord(0, 0.0, {n: T.copy() for n, T in P.items()}, frozenset(), tuple(touching), leaves[0], leaves[1],
                      (), None, 0.0, dist, max(initial_depths.values(), default=0.0), _deepest_first(initial_depths))
@@ -485,22 +502,27 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
 
         def approaching(pair, current) -> bool:
             # continuous: touching teeth that slide along each other can still sink in, so the
-            # exact meshes decide (closer, or intersecting, at the end of the motion);
+            # exact meshes decide (closer, or sinking deeper, at the end of the motion; teeth of
+            # the two arches may slide: only sinking deeper than occlusal_slide_mm counts);
             # discrete detectors only look at the end poses, and the crown centres decide
             if detector != "continuous":
                 return _approaching(model, pair, current, dt, centers)
             end = {n: (P1[n] if n in current else P[n]) for n in pair}
             d0, d1 = _exact_distance(model, P, pair, distances), _exact_distance(model, end, pair, distances)
-            return d1 <= 0.0 or d1 < d0 - 1e-6
+            facing = pair in model.facing
+            if d1 > 0.0:
+                return not facing and d1 < d0 - 1e-6
+            if facing:  # sliding cusps: bounded against the rest state, so steps cannot add up
+                return _depth(model, end, pair, sink_memo) - initial_depths.get(pair, 0.0) > s.occlusal_slide_mm
+            start = _depth(model, P, pair, sink_memo) if d0 <= 0.0 else 0.0
+            deeper = _depth(model, end, pair, sink_memo) - start
+            return deeper > (1e-6 if d0 > 0.0 else s.contact_tolerance_mm)
 
         def tested(current: dict[int, Motion], skip: set) -> list[tuple[int, int]]:
             out = []
             for pair in model.pairs:
                 a, b = pair
                 if pair in skip or (a not in current and b not in current):
-                    continue
-                if pair in model.facing and not (_vertical_mover(current.get(a), centers[a], dt)
-                                                 or _vertical_mover(current.get(b), centers[b], dt)):
                     continue
                 if pair in touching_set and not approaching(pair, current):
                     continue
@@ -540,6 +562,14 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                 for n, t in cut.items():
                     P1[n] = interpolate_pose(P[n], P1[n], t)
                     tcut[n] *= t
+            # The sliding allowance was checked at the intended end of each move; a move cut short
+            # by another contact may stop mid-way over a cusp, deeper than its end would be: such a
+            # tooth keeps its start pose, so the bound holds on the poses a step leaves.
+            for pair in touching_set:
+                if pair in model.facing and any(P1[n] is not P[n] for n in pair) and \
+                        _depth(model, P1, pair, sink_memo) - initial_depths.get(pair, 0.0) > s.occlusal_slide_mm:
+                    for n in pair:
+                        P1[n] = P[n]
         else:
             pairs = tested(motions, set())
             tested_pairs.update(pairs)
