@@ -242,7 +242,6 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
         big = staged["setup_28_teeth"]
         click.echo(f"staging: {big['teeth']} teeth, {big['stages']} stages planned in {big['staging_s']:.1f} s "
                    f"(target {big['target_s']:.0f} s); " + ", ".join(f"{k} {v['staging_s']:.1f} s" for k, v in staged["cases"].items()))
-
     if record.get("report"):
         r = record["report"]
         click.echo(f"report of {r['cases']} cases x 3 detectors from existing runs: {r['report_s']:.1f} s "
@@ -408,7 +407,9 @@ def _run_case(case_path: Path, out_dir: Path, options: RunOptions) -> dict:
     # out_dir is checked and locked now, before any work; the run is written into a private
     # staging folder that replaces it whole at the end, so a failed or stopped run leaves it as it was
     lines: list[str] = []
-    with output_folder(out_dir) as staging:
+    # a case file kept in its own run folder (each `orthosim batch` variant's case.toml) is an input: kept
+    carry = (Path(case_path).name,) if Path(case_path).resolve().parent == Path(out_dir).resolve() else ()
+    with output_folder(out_dir, carry) as staging:
         record = run_case(case_path, staging, options, draw=_render_steps, check_view=check_view,
                           shown_dir=out_dir, summary_to=lines.append)
     for line in lines:  # after the swap: the summary names files that are there

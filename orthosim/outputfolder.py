@@ -39,8 +39,8 @@ from .runfolder import RUN_FILE
 
 # What an `orthosim run` folder may hold without run.json (a run from before run.json existed):
 # such a folder is an earlier run, and may be replaced.
-RUN_OUTPUTS = frozenset({RUN_FILE, "metrics.json", "distances.csv", "steps.jsonl", "frames", "animation.mp4",
-                         "animation.gif"})
+RUN_OUTPUTS = frozenset({RUN_FILE, "metrics.json", "distances.csv", "distances_per_step.csv", "steps.jsonl", "frames",
+                         "scene", "animation.mp4", "animation.gif"})
 _STAGING = ".orthosim-staging-"
 _OLD = ".orthosim-old-"
 _LOCK = ".orthosim-lock"
@@ -52,8 +52,10 @@ class OutputFolderError(OrthosimError):
     """`--out` cannot take this run: a file, unwritable, read-only, busy, foreign, or the disk filled."""
 
 
-def check_output_folder(target: str | Path) -> Path:
+def check_output_folder(target: str | Path, carry: tuple[str, ...] = ()) -> Path:
     """Refuse, in one line, an `--out` that cannot take a run; returns it as an absolute path.
+
+    carry: names in the folder that are the run's inputs (its case file), kept across the swap.
 
     Only what can be told without writing: a file in the way, a foreign folder. Whether the place
     can be written is found by creating the staging folder (`output_folder`), the only test that
@@ -68,7 +70,7 @@ def check_output_folder(target: str | Path) -> Path:
             names = {p.name for p in target.iterdir()}
         except OSError as err:
             raise OutputFolderError(where, None, f"cannot be read ({err.strerror})", "give a folder you can write") from None
-        foreign = sorted(n for n in names if n not in RUN_OUTPUTS)
+        foreign = sorted(n for n in names if n not in RUN_OUTPUTS and n not in carry)
         if foreign and RUN_FILE not in names:
             raise OutputFolderError(where, None, f"holds files that no orthosim run wrote ({', '.join(foreign[:3])}"
                                     f"{', ...' if len(foreign) > 3 else ''}), which replacing it would delete",
@@ -80,14 +82,18 @@ def check_output_folder(target: str | Path) -> Path:
 
 
 @contextmanager
-def output_folder(target: str | Path) -> Iterator[Path]:
+def output_folder(target: str | Path, carry: tuple[str, ...] = ()) -> Iterator[Path]:
     """Check `target`, lock it, and yield a private staging folder that replaces it whole on success.
+
+    carry: files of the target that are the run's own inputs (a batch writes each variant's
+    case.toml into its run folder, then runs it there): copied into the staging folder first, so
+    the finished folder still holds them.
 
     Raises OutputFolderError (one line) before any work when the target cannot take the run, when
     another run holds it, and after a failure to write for want of space or permission (the
     target then left as it was). Any other error passes through, the target equally untouched.
     """
-    target = check_output_folder(target)
+    target = check_output_folder(target, carry)
     where = f"--out {target}"
     parent = target.parent
     try:
@@ -104,6 +110,9 @@ def output_folder(target: str | Path) -> Iterator[Path]:
             raise OutputFolderError(where, None, f"cannot be written ({err.strerror})",
                                     "give a folder on a writable file system where you have write permission") from None
         try:
+            for name in carry:
+                if (target / name).is_file():
+                    shutil.copy2(target / name, staging / name)
             yield staging
             _swap_in(staging, target)
         except BaseException as exc:

@@ -11,9 +11,8 @@ regenerate every golden and its sidecar with ONE command, then review `git diff 
     PYOPENGL_PLATFORM=osmesa .venv/bin/python -m pytest tests/test_golden_images.py --orthosim-regen-all
 
 Goldens here: the normal occlusion in each of the five views; each paper case's last step with its
-contacts; the sphere tree of a first molar level by level (the paper's Figure 2). The distance map
-of the reports issue gets its golden here too once that report exists (one more test below,
-`distance_map_<case>` as its name).
+contacts; the sphere tree of a first molar level by level (the paper's Figure 2); the report's
+inter-arch distance map of case 1 before treatment.
 """
 
 from __future__ import annotations
@@ -68,3 +67,24 @@ def test_sphere_tree_levels_of_a_first_molar_match_their_golden(orthosim_image_r
     levels = list(range(1, tree.depth))
     image = render_sphere_tree(tooth, tree, levels, size=(SIZE[0] // (1 + len(levels)), SIZE[1]))
     orthosim_image_regression.check(image, "spheretree_levels_tooth16")
+
+
+def test_distance_map_of_case1_before_treatment_matches_its_golden(orthosim_image_regression):
+    """The report's inter-arch distance map (an occlusal map): every upper crown vertex coloured by
+    its exact distance to the lower arch, case 1 at rest, seen from below (maxillary occlusal)."""
+    from orthosim.case import load_case
+    from orthosim.distancemap import DistanceMapModel
+    from render.frame_state import FrameState
+    from render.regression import _renderer
+    from render.report.pictures import distance_colors
+    from render.scene import DentitionScene, paint_crowns
+
+    case = load_case(CASES / "case1_first_premolar_extraction.toml")
+    dent = case.build_dentition()
+    poses = dent.rest_poses()
+    maps = DistanceMapModel(dent).inter_arch(poses, absent=case.extractions)
+    scene = DentitionScene(dent, SIZE, hide_roots=True, show_markers=False, smooth_cej=False)
+    paint_crowns(scene, {n: distance_colors(m.distance_mm) for n, m in maps.items()})
+    scene.update(FrameState(poses=poses, extracted=frozenset(case.extractions)))
+    image = _renderer(SIZE).render(scene, "maxillary_occlusal")
+    orthosim_image_regression.check(image, "distance_map_case1_initial_maxillary_occlusal")

@@ -168,3 +168,16 @@ def test_a_full_disk_is_one_line_and_leaves_the_earlier_run_as_it_was(tiny_disk)
                 (staging / "frames" / f"{i:05d}.png").write_bytes(os.urandom(32 * 1024))
     assert _listing(out) == before
     assert sorted(p.name for p in tiny_disk.iterdir()) == ["out"]
+
+
+def test_a_case_file_kept_in_its_run_folder_is_carried_into_the_new_run(tmp_path):
+    """`orthosim batch` writes each variant's case.toml into its run folder, then runs it there."""
+    from orthosim.outputfolder import output_folder
+
+    target = tmp_path / "run"
+    target.mkdir()
+    (target / "case.toml").write_text("[model]\n")
+    with output_folder(target, carry=("case.toml",)) as staging:
+        (staging / "metrics.json").write_text("{}")
+    assert sorted(p.name for p in target.iterdir()) == ["case.toml", "metrics.json"]
+    assert (target / "case.toml").read_text() == "[model]\n"
