@@ -155,7 +155,7 @@ class DentitionScene:
         self.teeth: dict[int, _ToothDrawable] = {}
         for fdi in dentition.fdis:
             d = _ToothDrawable(pyrender, fdi, dentition.teeth[fdi], hide_roots, self.color_contact_faces,
-                               smooth_cej and not exact_contact_faces)
+                               smooth_cej and not self.color_contact_faces)
             self.teeth[fdi] = d
             self.scene.add_node(d.node)
 

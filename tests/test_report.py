@@ -14,6 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from orthosim.movement.report import read_steps
+
 ROOT = Path(__file__).resolve().parent.parent
 
 CASE_A = """
@@ -98,17 +100,19 @@ def test_report_json_figures_equal_the_metrics_of_the_runs(report):
         assert case["detectors"] == list(DETECTORS)
         for det, shown in case["runs"].items():
             metrics = json.loads((Path(shown["run_dir"]) / "metrics.json").read_text())
+            run = json.loads((Path(shown["run_dir"]) / "run.json").read_text())
+            steps = list(read_steps(shown["run_dir"]))
             assert metrics["detector"] == det
             for key in ("steps", "total_distance_mm", "max_penetration_mm", "initial_penetration_mm", "collisions",
                         "distances"):
                 assert shown[key] == metrics[key], key
             for n, t in metrics["teeth"].items():
                 assert shown["teeth"][n] == {k: t[k] for k in ("moved_mm", "rotated_deg", "extracted")}
-            assert [p["total_mm"] for p in shown["totals_over_days"]] == [s["total_distance_mm"] for s in metrics["per_step"]]
-            assert [p["day"] for p in shown["totals_over_days"]] == [s["time_days"] for s in metrics["per_step"]]
+            assert [p["total_mm"] for p in shown["totals_over_days"]] == [s["total_distance_mm"] for s in steps]
+            assert [p["day"] for p in shown["totals_over_days"]] == [s["time_days"] for s in steps]
             assert case["largest_interpenetration_mm"][det] == metrics["max_penetration_mm"]
-            assert case["throughput"][det]["fps"] == metrics["fps"]  # the run drew its frames (--render)
-            touching = {tuple(sorted(p)) for s in metrics["per_step"] for p in s["touching"]}
+            assert case["throughput"][det]["fps"] == run["render"]["fps"]  # the run drew its frames (--render)
+            touching = {tuple(sorted(p)) for s in steps for p in s["touching"]}
             assert {tuple(r["pair"]) for r in case["contacts"][det]} == touching
         # every crown vertex of every present tooth is in the distance map, before and after
         counts = {p: m["both"]["vertices"] for p, m in case["distance_map"].items()}

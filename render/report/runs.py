@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from orthosim.movement.report import STEPS_FILE, read_steps
 from orthosim.runfolder import RunFolderError, file_sha256, read_finished_run
 
 
@@ -45,6 +46,7 @@ FIGURES = ("steps", "total_distance_mm", "max_penetration_mm", "initial_penetrat
            "teeth")
 
 
+
 def _poses(raw: dict) -> dict[int, np.ndarray]:
     return {int(k): np.asarray(v, float) for k, v in raw.items()}
 
@@ -59,7 +61,7 @@ def read_run(run_dir: str | Path) -> RunData:
         m = json.loads(path.read_text())
         steps = tuple({"step": int(s["step"]), "time_days": float(s["time_days"]), "poses": _poses(s["poses"]),
                        "touching": [tuple(int(x) for x in p) for p in s["touching"]],
-                       "total_distance_mm": float(s["total_distance_mm"])} for s in m["per_step"])
+                       "total_distance_mm": float(s["total_distance_mm"])} for s in read_steps(run_dir))
         figures = {k: m[k] for k in FIGURES}
         case_name, step_days, duration = str(m["case"]), float(m["step_days"]), float(m["duration_days"])
         extracted = tuple(int(n) for n in m["extracted"])
@@ -68,7 +70,7 @@ def read_run(run_dir: str | Path) -> RunData:
     except (KeyError, TypeError, ValueError) as err:
         raise RunFolderError(path, str(err).strip("'\""), "is missing or malformed", rerun) from None
     if not steps:
-        raise RunFolderError(path, "per_step", "holds no step", rerun)
+        raise RunFolderError(run_dir / STEPS_FILE, None, "holds no step", rerun)
     case_file = Path(record["case_file"])
     if not case_file.is_file():
         raise RunFolderError(run_dir / "run.json", "case_file", f"names {case_file}, which does not exist here",
@@ -76,11 +78,14 @@ def read_run(run_dir: str | Path) -> RunData:
     if file_sha256(case_file) != record.get("case_sha256"):
         raise RunFolderError(run_dir / "run.json", "case_sha256", f"{case_file} has changed since the run",
                              f"run it again: orthosim run {case_file} --out {run_dir}")
-    # machine-dependent figures may live in run.json or metrics.json: read them from either
-    def figure(key):
-        return record.get(key, m.get(key))
+    # machine-dependent figures live in run.json: the drawing's under "render", the run's wall time
+    # under "timings_s" (older runs kept some in metrics.json)
+    drawn = record.get("render") or {}
 
-    wall = figure("wall_s")
+    def figure(key):
+        return record.get(key, drawn.get(key, m.get(key)))
+
+    wall = record.get("wall_s", (record.get("timings_s") or {}).get("total", m.get("wall_s")))
     throughput = {"fps": figure("fps"), "render_fps": figure("render_fps"), "frames": figure("frames"),
                   "wall_s": wall, "steps_per_s": (len(steps) - 1) / wall if wall else None}
     return RunData(run_dir, case_file, str(record["case_sha256"]), str(record["detector"]), case_name, step_days,
