@@ -2,19 +2,12 @@
 
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from cli_helpers import orthosim
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def orthosim(*args, cwd=ROOT):
-    env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa"}
-    return subprocess.run([sys.executable, "-c", "from orthosim.cli import entry; entry()", *args],
-                          cwd=cwd, capture_output=True, text=True, env=env, timeout=600)
 
 
 def test_help_lists_every_command_with_one_line():

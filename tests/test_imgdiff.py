@@ -10,10 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,18 +19,13 @@ import pytest
 from render.imgdiff import (DIFF_COLOUR, GoldenSidecar, Tolerance, compare_images, diff_image, read_png,
                             read_sidecar, sidecar_path, write_golden)
 from render.png import encode_png
+from cli_helpers import orthosim
 
 ROOT = Path(__file__).resolve().parent.parent
 CASES = ROOT / "cases"
 GOLDEN = ROOT / "tests" / "golden"
 NORMAL_FRONTAL = GOLDEN / "normal_occlusion_frontal.png"
 CASE3_FRONTAL = GOLDEN / "case3_incisor_space_closure_last_step_frontal.png"
-
-
-def orthosim(*args, cwd=ROOT):
-    env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa"}
-    return subprocess.run([sys.executable, "-c", "from orthosim.cli import entry; entry()", *args],
-                          cwd=cwd, capture_output=True, text=True, env=env, timeout=600)
 
 
 def other_mesa(sidecar: GoldenSidecar) -> GoldenSidecar:

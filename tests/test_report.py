@@ -5,16 +5,14 @@ from __future__ import annotations
 
 import io
 import json
-import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from orthosim.movement.report import read_steps
+from cli_helpers import orthosim as run_cli
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -60,9 +58,7 @@ DETECTORS = ("circles", "continuous")
 
 
 def orthosim(*args, cwd=ROOT):
-    env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa"}
-    return subprocess.run([sys.executable, "-c", "from orthosim.cli import entry; entry()", *args],
-                          cwd=cwd, capture_output=True, text=True, env=env, timeout=1200)
+    return run_cli(*args, cwd=cwd, timeout=1200)  # a report runs several cases
 
 
 def chromium_required():

@@ -3,10 +3,7 @@ that gives every number its unit, the per-step distance table, the exported scen
 length and views, and options refused before any work."""
 
 import json
-import os
 import re
-import subprocess
-import sys
 from importlib import resources
 from pathlib import Path
 
@@ -14,6 +11,7 @@ import numpy as np
 import pytest
 
 from orthosim.run import RunOptions, frames_per_step, run_case
+from cli_helpers import orthosim
 
 ROOT = Path(__file__).resolve().parent.parent
 UNIT_SUFFIXES = ("_mm", "_deg", "_days", "_cN", "_cNmm", "_J", "_mm_per_day", "_rad_per_day", "_g_mm_per_day", "_mm2")
@@ -138,12 +136,6 @@ def test_ply_export_writes_one_posed_tooth_per_file(short_case, tmp_path):
     dent = load_case(short_case).build_dentition()
     mesh = trimesh.load(tmp_path / "o" / "scene" / "step_00000" / "tooth_11.ply")
     assert np.allclose(mesh.vertices.mean(axis=0), dent.teeth[11].world_mesh().vertices.mean(axis=0), atol=1e-4)
-
-
-def orthosim(*args):
-    env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa"}
-    return subprocess.run([sys.executable, "-c", "from orthosim.cli import entry; entry()", *args],
-                          cwd=ROOT, capture_output=True, text=True, env=env, timeout=600)
 
 
 @pytest.mark.parametrize("args, expected", [
