@@ -57,3 +57,26 @@ def test_blend_clips_at_the_edges_and_keeps_alpha_images_opaque_under_text():
     patch = text_patch("17", 12)
     blend(image, patch, 15, 15)  # runs off the bottom right corner
     assert image[15:, 15:, 3].max() > 0 and image[:15, :15].max() == 0
+
+
+@pytest.mark.parametrize("channels", [3, 4])
+def test_blend_is_the_rounded_alpha_mix_of_patch_and_image_everywhere(channels):
+    """Every pixel under a patch becomes round((patch * a + image * (255 - a)) / 255), for every alpha
+    from 0 to 255, also where the patch is clipped at the image's edges."""
+    rng = np.random.default_rng(7)
+    patch = rng.integers(0, 256, (40, 50, 4), dtype=np.uint8)
+    patch[0, :, 3] = 0
+    patch[1, :, 3] = 255
+    patch[2, :50, 3] = np.arange(50) * 5
+    for x, y in ((3, 4), (-7, -5), (20, 12)):
+        image = rng.integers(0, 256, (30, 45, channels), dtype=np.uint8)
+        expected = image.copy()
+        x0, y0, x1, y1 = max(x, 0), max(y, 0), min(x + 50, 45), min(y + 40, 30)
+        p = patch[y0 - y:y1 - y, x0 - x:x1 - x].astype(np.float64)
+        under = expected[y0:y1, x0:x1].astype(np.float64)
+        a = p[:, :, 3:4] / 255.0
+        expected[y0:y1, x0:x1, :3] = np.round(p[:, :, :3] * a + under[:, :, :3] * (1 - a)).astype(np.uint8)
+        if channels == 4:
+            expected[y0:y1, x0:x1, 3] = np.maximum(under[:, :, 3], p[:, :, 3]).astype(np.uint8)
+        blend(image, patch, x, y)
+        assert np.array_equal(image, expected)
