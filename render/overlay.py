@@ -187,19 +187,23 @@ def label_view(image: np.ndarray, view, dentition, poses: Mapping[int, np.ndarra
     px = font_px or font_px_for((w, h))
     shown = [n for n in teeth if arch_of(n) in view.arches]
     if shown:
-        centres = np.array([dentition.teeth[n].to_world(dentition.teeth[n].crown_center, poses[n]) for n in shown])
+        T = np.stack([poses[n] for n in shown])
+        local = np.stack([dentition.teeth[n].crown_center for n in shown])
+        centres = np.einsum("nij,nj->ni", T[:, :3, :3], local) + T[:, :3, 3]
         uv = view.project(centres, (w, h))
         depth = np.linalg.norm(centres - view.pose[:3, 3], axis=1)
-        placed: list[tuple[int, int, int, int]] = []
+        patches = [text_patch(str(n), px, LABEL_COLOR, LABEL_FILL, 2) for n in shown]
+        sizes = np.array([p.shape[:2] for p in patches])  # (h, w) each
+        corner = np.rint(uv - sizes[:, ::-1] / 2).astype(int)  # (x, y) of each label's top left
+        boxes = np.concatenate([corner, corner + sizes[:, ::-1]], axis=1)  # x0, y0, x1, y1
+        placed = np.zeros(len(shown), bool)
         for i in np.argsort(depth, kind="stable"):
-            patch = text_patch(str(shown[i]), px, LABEL_COLOR, LABEL_FILL, 2)
-            ph, pw = patch.shape[:2]
-            x, y = int(round(uv[i, 0] - pw / 2)), int(round(uv[i, 1] - ph / 2))
-            box = (x, y, x + pw, y + ph)
-            if any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in placed):
+            b, others = boxes[i], boxes[placed]
+            if (len(others) and ((b[0] < others[:, 2]) & (others[:, 0] < b[2])
+                                 & (b[1] < others[:, 3]) & (others[:, 1] < b[3])).any()):
                 continue
-            placed.append(box)
-            blend(image, patch, x, y)
+            placed[i] = True
+            blend(image, patches[i], int(b[0]), int(b[1]))
     gone = [n for n in extracted if n in dentition.teeth and arch_of(n) in view.arches]
     if gone:
         centres = np.array([dentition.teeth[n].to_world(dentition.teeth[n].crown_center) for n in gone])
