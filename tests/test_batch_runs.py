@@ -86,6 +86,34 @@ def test_every_run_writes_a_finished_run_folder_and_a_row(local_batch):
     assert leftovers(out) == []
 
 
+def test_workers_are_started_once_and_run_many_runs_each(local_batch):
+    out, vs, rows = local_batch
+    table = json.loads((out / "batch.json").read_text())
+    workers = [r["worker"] for r in table["runs"]]
+    assert len(workers) == 3 and all(workers)
+    assert len(set(workers)) <= 2  # three runs on a pool of two: a process per run would show three
+    assert all(r["cpu_s"] > 0 for r in table["runs"])  # each run's own CPU, for planning a batch's size
+
+
+def test_the_table_is_rewritten_every_few_seconds_not_after_every_run(case_file, tmp_path, monkeypatch):
+    from orthosim.batch import execute
+
+    writes = []
+    real = execute.write_table
+    monkeypatch.setattr(execute, "write_table", lambda *a, **k: (writes.append(time.perf_counter()), real(*a, **k)))
+    vs = variants(case_file, "loads.0.force_cN=" + ",".join(str(100 + i) for i in range(40)))
+    started = time.perf_counter()
+    rows = run_batch(vs, tmp_path, H.instant, BatchOptions(workers=2, progress=False), ["loads.0.force_cN"])
+    elapsed = time.perf_counter() - started
+    assert [r.status for r in rows] == ["ok"] * 40
+    # once before the runs, at most once per TABLE_EVERY_S while they end, once at the end
+    assert len(writes) <= 2 + elapsed / execute.TABLE_EVERY_S + 1
+    assert len(writes) < 40
+    table = json.loads((tmp_path / "batch.json").read_text())  # the last write holds every run
+    assert table["runs_ok"] == 40 and [r["run_id"] for r in table["runs"]] == ids(vs)
+    assert len((tmp_path / "batch.csv").read_text().splitlines()) == 41
+
+
 def test_a_second_invocation_reuses_finished_runs_and_runs_nothing(local_batch):
     out, vs, _ = local_batch
     before = {v.run_id: (out / v.run_id / "run.json").stat().st_mtime_ns for v in vs}
