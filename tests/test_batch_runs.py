@@ -253,3 +253,18 @@ def test_the_batch_builds_each_models_trees_before_its_workers_start(case_file, 
     run_batch(vs, tmp_path, H.crash, BatchOptions(workers=1, render_opts={"fail_runs": ids(vs)}, progress=False))
     # one case file per distinct model (three coarse variants share one), each written before the build
     assert [p.parent.name for p in built] == [vs[0].run_id, vs[3].run_id]
+
+
+def test_the_bench_figure_runs_the_same_runs_on_a_cold_pool_of_one_and_of_two_workers(case_file):
+    from orthosim.batch.bench import batch_throughput
+
+    record = batch_throughput(H.instant, case_file, runs=6)
+    assert record["runs"] == 6 and "6 runs" in record["batch_size_why"]
+    assert not [k for k in record if k.startswith("errors_")]
+    one, two = record["detail_1_worker"], record["detail_2_workers"]
+    assert one["worker_processes"] == 1 and 1 <= two["worker_processes"] <= 2
+    for name in ("1_worker", "2_workers"):
+        assert record[f"per_minute_{name}"] == pytest.approx(6 / record[f"wall_s_{name}"] * 60)
+        assert record[f"detail_{name}"]["workers_cpu_s_per_run"] > 0  # the workers' start-up at least
+    assert record["ratio_2_to_1"] == pytest.approx(record["per_minute_2_workers"] / record["per_minute_1_worker"])
+    assert record["meets_target"] == (record["ratio_2_to_1"] >= record["target_ratio_2_to_1"])
