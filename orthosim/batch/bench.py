@@ -9,7 +9,7 @@ model's sphere trees are made before either measurement, so neither pays for bui
 Batch size (`RUNS`): users render hundreds of runs, and a batch that short that each worker's
 start-up (interpreter, imports, the first run's loading of compiled kernels: about 2 s of CPU
 here, once per worker) is a large share of it measures process start, not throughput. With 24
-runs each of 2 workers does 12, and start-up is under a tenth of its time.
+runs each of 2 workers does 12, and start-up is about a tenth of its CPU (a twentieth for 1 worker).
 
 Beside the figures, what explains them: the workers' CPU seconds per run (from the operating
 system's accounting of the finished worker processes, ffmpeg included) and the cores the batch
