@@ -61,7 +61,8 @@ class RunOutcome:
     log: str
     wall_s: float
     worker: str = ""  # host:pid that ran it
-    cpu_s: float | None = None  # CPU seconds of the worker process and its children (ffmpeg) during the run
+    cpu_s: float | None = None  # CPU seconds of the worker process and its children (ffmpeg) during the run; on a
+    # Dask worker running several tasks at once, theirs too
 
 
 def process_cpu_s() -> float:
