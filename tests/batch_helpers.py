@@ -80,3 +80,10 @@ def hang_or_crash(case_path, out_dir, detector, opts):
     if names and Path(out_dir).name == names[0]:
         return crash(case_path, out_dir, detector, {**opts, "fail_runs": names[:1]})
     return hang(case_path, out_dir, detector, opts)
+
+
+def instant(case_path, out_dir, detector, opts):
+    """No simulation, no drawing: a run that ends at once with a plausible summary (for tests of
+    the batch's own machinery: its table, its pool)."""
+    return {"steps": 1, "collisions": 0, "max_penetration_mm": 0.0,
+            "total_distance_mm": {"initial": 1.0, "final": 0.5}, "frames": 0, "wall_s": 0.0}

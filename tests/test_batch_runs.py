@@ -86,6 +86,34 @@ def test_every_run_writes_a_finished_run_folder_and_a_row(local_batch):
     assert leftovers(out) == []
 
 
+def test_workers_are_started_once_and_run_many_runs_each(local_batch):
+    out, vs, rows = local_batch
+    table = json.loads((out / "batch.json").read_text())
+    workers = [r["worker"] for r in table["runs"]]
+    assert len(workers) == 3 and all(workers)
+    assert len(set(workers)) <= 2  # three runs on a pool of two: a process per run would show three
+    assert all(r["cpu_s"] > 0 for r in table["runs"])  # each run's own CPU, for planning a batch's size
+
+
+def test_the_table_is_rewritten_every_few_seconds_not_after_every_run(case_file, tmp_path, monkeypatch):
+    from orthosim.batch import execute
+
+    writes = []
+    real = execute.write_table
+    monkeypatch.setattr(execute, "write_table", lambda *a, **k: (writes.append(time.perf_counter()), real(*a, **k)))
+    vs = variants(case_file, "loads.0.force_cN=" + ",".join(str(100 + i) for i in range(40)))
+    started = time.perf_counter()
+    rows = run_batch(vs, tmp_path, H.instant, BatchOptions(workers=2, progress=False), ["loads.0.force_cN"])
+    elapsed = time.perf_counter() - started
+    assert [r.status for r in rows] == ["ok"] * 40
+    # once before the runs, at most once per TABLE_EVERY_S while they end, once at the end
+    assert len(writes) <= 2 + elapsed / execute.TABLE_EVERY_S + 1
+    assert len(writes) < 40
+    table = json.loads((tmp_path / "batch.json").read_text())  # the last write holds every run
+    assert table["runs_ok"] == 40 and [r["run_id"] for r in table["runs"]] == ids(vs)
+    assert len((tmp_path / "batch.csv").read_text().splitlines()) == 41
+
+
 def test_a_second_invocation_reuses_finished_runs_and_runs_nothing(local_batch):
     out, vs, _ = local_batch
     before = {v.run_id: (out / v.run_id / "run.json").stat().st_mtime_ns for v in vs}
@@ -225,3 +253,18 @@ def test_the_batch_builds_each_models_trees_before_its_workers_start(case_file, 
     run_batch(vs, tmp_path, H.crash, BatchOptions(workers=1, render_opts={"fail_runs": ids(vs)}, progress=False))
     # one case file per distinct model (three coarse variants share one), each written before the build
     assert [p.parent.name for p in built] == [vs[0].run_id, vs[3].run_id]
+
+
+def test_the_bench_figure_runs_the_same_runs_on_a_cold_pool_of_one_and_of_two_workers(case_file):
+    from orthosim.batch.bench import batch_throughput
+
+    record = batch_throughput(H.instant, case_file, runs=6)
+    assert record["runs"] == 6 and "6 runs" in record["batch_size_why"]
+    assert not [k for k in record if k.startswith("errors_")]
+    one, two = record["detail_1_worker"], record["detail_2_workers"]
+    assert one["worker_processes"] == 1 and 1 <= two["worker_processes"] <= 2
+    for name in ("1_worker", "2_workers"):
+        assert record[f"per_minute_{name}"] == pytest.approx(6 / record[f"wall_s_{name}"] * 60)
+        assert record[f"detail_{name}"]["workers_cpu_s_per_run"] > 0  # the workers' start-up at least
+    assert record["ratio_2_to_1"] == pytest.approx(record["per_minute_2_workers"] / record["per_minute_1_worker"])
+    assert record["meets_target"] == (record["ratio_2_to_1"] >= record["target_ratio_2_to_1"])

@@ -61,6 +61,16 @@ class RunOutcome:
     log: str
     wall_s: float
     worker: str = ""  # host:pid that ran it
+    cpu_s: float | None = None  # CPU seconds of the worker process and its children (ffmpeg) during the run; on a
+    # Dask worker running several tasks at once, theirs too
+
+
+def process_cpu_s() -> float:
+    """CPU seconds used so far by this process (every thread) and its finished children."""
+    import resource
+
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 @contextlib.contextmanager
@@ -90,7 +100,7 @@ def execute(run_case: RunCase, task: RunTask) -> RunOutcome:
     import warnings
 
     log = io.StringIO()
-    started = time.perf_counter()
+    started, cpu_started = time.perf_counter(), process_cpu_s()
     error, summary = None, {}
     with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log), warnings.catch_warnings():
         warnings.simplefilter("default")
@@ -104,7 +114,7 @@ def execute(run_case: RunCase, task: RunTask) -> RunOutcome:
             error = f"{type(err).__name__}: {' '.join(str(err).split())}"
             log.write(traceback.format_exc())
     return RunOutcome(task.run_id, error is None, error, summary, log.getvalue(), time.perf_counter() - started,
-                      f"{socket.gethostname()}:{os.getpid()}")
+                      f"{socket.gethostname()}:{os.getpid()}", process_cpu_s() - cpu_started)
 
 
 def execute_shipped(run_case: RunCase, run_id: str, case_text: str, detector: str, render_opts: dict) -> tuple[RunOutcome, dict[str, bytes]]:
