@@ -262,6 +262,18 @@ class _Split:
 
 # ------------------------------------------------------------------------------------------ the run
 
+_SIMULATION_MODULES = ("orthosim.run", "orthosim.collision", "orthosim.movement.simulation")
+
+
+def _import_simulation() -> None:
+    """Import what the simulation side runs on (numpy, trimesh, FCL, numba and ours), before a fork."""
+    import importlib
+
+    for name in _SIMULATION_MODULES:
+        importlib.import_module(name)
+
+
+
 
 def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = RunOptions(),
              draw: Callable | None = None, check_view: Callable[[str], str] | None = None,
@@ -312,18 +324,30 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
                 dent = case.build_dentition()
                 split, where = _Split(simulation_stream(case, options.detector, out_dir, dentition=dent), log, keep), "in this process"
             else:
-                from .background import ChildProcessIterator
+                from .background import ChildProcessIterator, fork_is_safe
 
-                child = stack.enter_context(ChildProcessIterator(ignore_warnings=True, preload=(
-                    "orthosim.run", "orthosim.collision", "orthosim.movement.simulation")))
-                dent = None
-                if not case.dentition_is_cached():  # built once, here, and cached for the child
+                if fork_is_safe():
+                    # fork: the child starts as a copy of this process, with the simulation's
+                    # imports done and the teeth loaded once; the renderer (and its OpenGL
+                    # context) comes after the fork, in this process only
                     t = time.perf_counter()
+                    _import_simulation()
+                    cached = case.dentition_is_cached()
                     dent = case.build_dentition()
-                    log.phase("model", time.perf_counter() - t, f"{dent.description}, built and cached")
-                given = dent if dent is not None and not case.dentition_is_cached() else None  # unwritable cache
-                child.submit(simulation_stream, case, options.detector, out_dir, dentition=given)
-                dent = dent or case.build_dentition()
+                    log.phase("model", time.perf_counter() - t,
+                              f"{dent.description}, {'from the cache' if cached else 'built and cached'}")
+                    child = stack.enter_context(ChildProcessIterator(ignore_warnings=True, start_method="fork"))
+                    child.submit(simulation_stream, case, options.detector, out_dir, dentition=dent)
+                else:
+                    child = stack.enter_context(ChildProcessIterator(ignore_warnings=True, preload=_SIMULATION_MODULES))
+                    dent = None
+                    if not case.dentition_is_cached():  # built once, here, and cached for the child
+                        t = time.perf_counter()
+                        dent = case.build_dentition()
+                        log.phase("model", time.perf_counter() - t, f"{dent.description}, built and cached")
+                    given = dent if dent is not None and not case.dentition_is_cached() else None  # unwritable cache
+                    child.submit(simulation_stream, case, options.detector, out_dir, dentition=given)
+                    dent = dent or case.build_dentition()
                 split, where = _Split(child, log, keep), "beside the drawing"
             rendered = draw(dent, split, out_dir, options, extracted=frozenset(case.extractions), per_step=per_step,
                             total=n_frames, progress=log.bars_shown, case=case)
