@@ -326,6 +326,7 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
             else:
                 from .background import ChildProcessIterator, fork_is_safe
 
+                dent = None
                 if fork_is_safe():
                     # fork: the child starts as a copy of this process, with the simulation's
                     # imports done and the teeth loaded once; the renderer (and its OpenGL
@@ -336,12 +337,12 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
                     dent = case.build_dentition()
                     log.phase("model", time.perf_counter() - t,
                               f"{dent.description}, {'from the cache' if cached else 'built and cached'}")
+                if dent is not None and fork_is_safe():  # still no thread running after the build
                     child = stack.enter_context(ChildProcessIterator(ignore_warnings=True, start_method="fork"))
                     child.submit(simulation_stream, case, options.detector, out_dir, dentition=dent)
                 else:
                     child = stack.enter_context(ChildProcessIterator(ignore_warnings=True, preload=_SIMULATION_MODULES))
-                    dent = None
-                    if not case.dentition_is_cached():  # built once, here, and cached for the child
+                    if dent is None and not case.dentition_is_cached():  # built once, here, and cached for the child
                         t = time.perf_counter()
                         dent = case.build_dentition()
                         log.phase("model", time.perf_counter() - t, f"{dent.description}, built and cached")
