@@ -232,6 +232,7 @@ def _produce(work, q, stop, ignore_warnings: bool, preload: tuple[str, ...], par
     send its items, then the end or the error."""
     exit_with_parent(parent_pid)  # a parent killed outright cannot stop us: end with it
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # a forked child inherits the CLI's SIGTERM handler: `close` ends it now
     if ignore_warnings:
         warnings.simplefilter("ignore")
     parent = os.getppid()
