@@ -9,6 +9,9 @@
     with child.submit(simulate_case, case, "continuous", dentition=dentition) as records:
         ...
 
+    with in_child_process(simulate, model, "continuous", start_method="fork") as records:
+        ...                                 # a copy of this process runs simulate(model, ...)
+
 Why a process and not a thread: a simulation step is mostly Python and FCL calls that hold the
 GIL, and so is much of updating the scene and feeding the encoders; on a thread the two take turns
 instead of running on two cores. The child runs `factory(*args, **kwargs)` and sends each item it
@@ -19,7 +22,8 @@ bounded. Two ways to start the child:
     FCL and numba), `factory` and its arguments must be picklable (a module-level function), and,
     as with any spawned child, the main module must be importable again without side effects (the
     `orthosim` command, `python -c`, `-m`, or a script whose work sits under
-    `if __name__ == "__main__":`);
+    `if __name__ == "__main__":`); multiprocessing keeps its resource-tracker helper process until
+    this one exits;
   - "fork" (`start_method="fork"`, Linux): a copy of this process at `submit`, with its imports,
     loaded caches and the arguments as they are (nothing pickled on the way in). Only for a caller
     that has started no threads and created no OpenGL context yet (`fork_is_safe` says whether
@@ -59,8 +63,9 @@ class ChildProcessIterator:
     Two stages, so that the child's start-up overlaps with the caller's own set-up: construction
     starts the child, which imports the `preload` modules (seconds for numpy, trimesh, FCL and
     numba) and waits; `submit` then gives it its work, whose arguments may be things the caller
-    built meanwhile (a dentition). `in_child_process` does both at once. Use it as a context
-    manager, or call `close`.
+    built meanwhile (a dentition). `in_child_process` does both at once. With
+    `start_method="fork"` construction starts nothing (`preload` is not used) and `submit` forks the
+    child with its work. Use it as a context manager, or call `close`.
     """
 
     def __init__(self, *, depth: int = 4, name: str = "orthosim-producer", ignore_warnings: bool = False,
