@@ -64,7 +64,7 @@ class ChildProcessIterator:
     starts the child, which imports the `preload` modules (seconds for numpy, trimesh, FCL and
     numba) and waits; `submit` then gives it its work, whose arguments may be things the caller
     built meanwhile (a dentition). `in_child_process` does both at once. With
-    `start_method="fork"` construction starts nothing (`preload` is not used) and `submit` forks the
+    `start_method="fork"` construction starts nothing (give no `preload`) and `submit` forks the
     child with its work. Use it as a context manager, or call `close`.
     """
 
@@ -72,6 +72,8 @@ class ChildProcessIterator:
                  preload: Sequence[str] = (), start_method: str = "spawn"):
         if start_method not in ("spawn", "fork"):
             raise ValueError(f"start_method must be 'spawn' or 'fork', not {start_method!r}")
+        if start_method == "fork" and preload:
+            raise ValueError("preload is for a spawned child; a forked one has this process's imports")
         ctx = multiprocessing.get_context(start_method)
         self._ctx, self._name, self._ignore_warnings = ctx, name, ignore_warnings
         self._queue = ctx.Queue(maxsize=max(1, int(depth)))

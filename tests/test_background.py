@@ -109,6 +109,8 @@ def test_a_forked_child_given_no_work_starts_nothing_and_closes_cleanly():
         assert child.pid is None
     with pytest.raises(ValueError, match="start_method"):
         ChildProcessIterator(start_method="forkserver")
+    with pytest.raises(ValueError, match="preload"):
+        ChildProcessIterator(start_method="fork", preload=["numpy"])
 
 
 def test_an_error_in_the_child_is_raised_here_as_the_same_error_after_the_items_before_it():
