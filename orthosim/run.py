@@ -142,10 +142,6 @@ def validate(case_path: str | Path, out_dir: str | Path, options: RunOptions, ch
     """
     from .case import DETECTORS, load_case
 
-    case = load_case(case_path)
-    detector = options.detector or case.detector
-    if detector not in DETECTORS:
-        raise OptionError("--detector", detector, "is not a detector", f"use one of {', '.join(DETECTORS)}")
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise OptionError(out_dir, None, "exists and is not a folder", "give --out a folder path")
@@ -163,6 +159,11 @@ def validate(case_path: str | Path, out_dir: str | Path, options: RunOptions, ch
         raise OptionError("--fps", str(options.fps), "is not 1 to 120 frames per second", "e.g. --fps 30")
     if options.export_scene is not None and options.export_scene not in SCENE_FORMATS:
         raise OptionError("--export-scene", options.export_scene, "is not a scene format", f"use one of {', '.join(SCENE_FORMATS)}")
+    # the options above stand alone; those below need the case (a mesh model's folders are checked too)
+    case = load_case(case_path)
+    detector = options.detector or case.detector
+    if detector not in DETECTORS:
+        raise OptionError("--detector", detector, "is not a detector", f"use one of {', '.join(DETECTORS)}")
     steps = options.export_steps
     if steps is not None:
         bad = [s for s in steps if not 0 <= s <= case.steps]

@@ -38,6 +38,10 @@ def _probe(*args, tmp_path: Path) -> tuple[int, str, list[str]]:
     (["cases/case1_first_premolar_extraction.toml", "--fps", "500"], "--fps: 500: is not 1 to 120 frames per second"),
     (["cases/case1_first_premolar_extraction.toml", "--detector", "nosuch"], "Invalid value for '--detector'"),
     (["cases/no_such_case.toml"], "no_such_case.toml"),
+    pytest.param(["cases/open_full_jaw_case3_diastema.toml", "--view", "sideways"], "--view: sideways: is not a camera preset",
+                 marks=pytest.mark.real_data, id="real-teeth case, bad view"),
+    pytest.param(["cases/open_full_jaw_case3_diastema.toml", "--export-steps", "99"], "--export-steps: 99: is not a step",
+                 marks=pytest.mark.real_data, id="real-teeth case read, bad step"),
 ])
 def test_help_and_refused_options_answer_before_any_heavy_import(tmp_path, args, expected):
     code, stderr, imported = _probe("run", *args, "--out", tmp_path / "o", tmp_path=tmp_path)
