@@ -334,6 +334,8 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
                     # context) comes after the fork, in this process only
                     t = time.perf_counter()
                     _import_simulation()
+                    log.phase("imports", time.perf_counter() - t, "numpy, trimesh, FCL, numba: once, for both processes")
+                    t = time.perf_counter()
                     cached = case.dentition_is_cached()
                     dent = case.build_dentition()
                     log.phase("model", time.perf_counter() - t,
