@@ -274,8 +274,6 @@ def _import_simulation() -> None:
         importlib.import_module(name)
 
 
-
-
 def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = RunOptions(),
              draw: Callable | None = None, check_view: Callable[[str], str] | None = None,
              shown_dir: str | Path | None = None, summary_to: Callable[[str], None] | None = None) -> dict:
