@@ -47,6 +47,7 @@ import os
 import pickle
 import queue
 import signal
+import sys
 import threading
 import warnings
 from typing import Any, Callable, Iterable, Sequence
@@ -217,10 +218,12 @@ def in_child_process(factory: Callable[..., Iterable], *args: Any, depth: int = 
 
 
 def fork_is_safe() -> bool:
-    """Whether this process may fork a child that goes on working: fork is available and this
-    process runs no Python thread but the main one (a thread holding a lock at the fork would
-    leave it held for ever in the child). OpenGL contexts are the caller's to avoid."""
-    return ("fork" in multiprocessing.get_all_start_methods() and threading.active_count() == 1
+    """Whether this process may fork a child that goes on working: on Linux (macOS's system
+    libraries do not survive a fork), and with no Python thread running but the main one (a thread
+    holding a lock at the fork would leave it held for ever in the child). OpenGL contexts are the
+    caller's to avoid."""
+    return (sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
+            and threading.active_count() == 1
             and threading.current_thread() is threading.main_thread())
 
 
