@@ -9,16 +9,27 @@
     with child.submit(simulate_case, case, "continuous", dentition=dentition) as records:
         ...
 
+    with in_child_process(simulate, model, "continuous", start_method="fork") as records:
+        ...                                 # a copy of this process runs simulate(model, ...)
+
 Why a process and not a thread: a simulation step is mostly Python and FCL calls that hold the
 GIL, and so is much of updating the scene and feeding the encoders; on a thread the two take turns
 instead of running on two cores. The child runs `factory(*args, **kwargs)` and sends each item it
 yields, pickled, through a bounded queue, so it runs at most `depth` items ahead and memory stays
-bounded. `factory` and its arguments must be picklable (a module-level function). The child is
-started with "spawn", a fresh interpreter, which is safe whatever threads or OpenGL contexts this
-process holds; as with any spawned child, the main module must be importable again without
-side effects (the `orthosim` command, `python -c`, `-m`, or a script whose work sits under
-`if __name__ == "__main__":`), and multiprocessing keeps its resource-tracker helper process
-until this one exits.
+bounded. Two ways to start the child:
+  - "spawn" (the default): a fresh interpreter, which is safe whatever threads or OpenGL contexts
+    this process holds; it imports everything again (a second or more of CPU for numpy, trimesh,
+    FCL and numba), `factory` and its arguments must be picklable (a module-level function), and,
+    as with any spawned child, the main module must be importable again without side effects (the
+    `orthosim` command, `python -c`, `-m`, or a script whose work sits under
+    `if __name__ == "__main__":`); multiprocessing keeps its resource-tracker helper process until
+    this one exits;
+  - "fork" (`start_method="fork"`, Linux): a copy of this process at `submit`, with its imports,
+    loaded caches and the arguments as they are (nothing pickled on the way in). Only for a caller
+    that has started no threads and created no OpenGL context yet (`fork_is_safe` says whether
+    this process has Python threads); `orthosim run` forks before it imports the renderer.
+Either way only the items cross back, pickled, and the child is not daemonic, so it may start its
+own worker processes (a cold sphere-tree cache builds trees over every core).
 
 Errors: an exception raised in the child is raised again in the consumer, as the same type with the
 same message (an `OrthosimError` stays one, and the CLI prints it as one line); a child that dies
@@ -36,6 +47,7 @@ import os
 import pickle
 import queue
 import signal
+import sys
 import threading
 import warnings
 from typing import Any, Callable, Iterable, Sequence
@@ -52,41 +64,63 @@ class ChildProcessIterator:
     Two stages, so that the child's start-up overlaps with the caller's own set-up: construction
     starts the child, which imports the `preload` modules (seconds for numpy, trimesh, FCL and
     numba) and waits; `submit` then gives it its work, whose arguments may be things the caller
-    built meanwhile (a dentition). `in_child_process` does both at once. Use it as a context
-    manager, or call `close`.
+    built meanwhile (a dentition). `in_child_process` does both at once. With
+    `start_method="fork"` construction starts nothing (give no `preload`) and `submit` forks the
+    child with its work. Use it as a context manager, or call `close`.
     """
 
     def __init__(self, *, depth: int = 4, name: str = "orthosim-producer", ignore_warnings: bool = False,
-                 preload: Sequence[str] = ()):
-        ctx = multiprocessing.get_context("spawn")
+                 preload: Sequence[str] = (), start_method: str = "spawn"):
+        if start_method not in ("spawn", "fork"):
+            raise ValueError(f"start_method must be 'spawn' or 'fork', not {start_method!r}")
+        if start_method == "fork" and preload:
+            raise ValueError("preload is for a spawned child; a forked one has this process's imports")
+        ctx = multiprocessing.get_context(start_method)
+        self._ctx, self._name, self._ignore_warnings = ctx, name, ignore_warnings
         self._queue = ctx.Queue(maxsize=max(1, int(depth)))
         self._stop = ctx.Event()
         self._done = False
+        self._submitted = False
         self._sender: threading.Thread | None = None
+        self._work = None
+        self._process = None
+        if start_method == "fork":  # started by submit, with the work in hand
+            return
         work_in, self._work = ctx.Pipe(duplex=False)
-        self._process = ctx.Process(target=_produce, args=(work_in, self._queue, self._stop, ignore_warnings, tuple(preload),
-                                                                 os.getpid()),
-                                    name=name, daemon=True)
+        try:
+            self._start(ctx.Process(target=_produce, args=(work_in, self._queue, self._stop, ignore_warnings, tuple(preload),
+                                                           os.getpid()), name=name, daemon=False))
+        finally:
+            work_in.close()  # the child's end
+
+    def _start(self, process) -> None:
+        self._process = process
         # Ctrl-C reaches every process of the terminal's foreground group; the child starts with
-        # SIGINT ignored (an ignored signal stays ignored across exec) and this process stops it.
+        # SIGINT ignored (an ignored signal stays ignored across exec and fork) and this process stops it.
         main_thread = threading.current_thread() is threading.main_thread()
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
         try:
-            self._process.start()
+            process.start()
         finally:
             if main_thread:
                 signal.signal(signal.SIGINT, previous)
-            work_in.close()  # the child's end
 
     def submit(self, factory: Callable[..., Iterable], *args: Any, **kwargs: Any) -> "ChildProcessIterator":
         """Have the child run `factory(*args, **kwargs)` and send its items; once per child.
 
-        The work is pickled here (an argument that cannot be pickled raises here) and written to
-        the child on a thread: a large argument does not hold the caller up while the child is
-        still importing.
+        spawn: the work is pickled here (an argument that cannot be pickled raises here) and written
+        to the child on a thread: a large argument does not hold the caller up while the child is
+        still importing. fork: the child is started now, as a copy of this process, and finds the
+        work in its memory.
         """
-        if self._sender is not None:
+        if self._submitted:
             raise RuntimeError("this child process has its work already")
+        self._submitted = True
+        if self._work is None:
+            self._start(self._ctx.Process(target=_produce, args=(None, self._queue, self._stop, self._ignore_warnings, (),
+                                                                 os.getpid(), (factory, args, kwargs)),
+                                          name=self._name, daemon=False))
+            return self
         data = pickle.dumps((factory, args, kwargs), protocol=pickle.HIGHEST_PROTOCOL)
 
         def send():
@@ -101,7 +135,7 @@ class ChildProcessIterator:
 
     @property
     def pid(self) -> int | None:
-        return self._process.pid
+        return None if self._process is None else self._process.pid
 
     def __iter__(self) -> "ChildProcessIterator":
         return self
@@ -109,7 +143,7 @@ class ChildProcessIterator:
     def __next__(self):
         if self._done:
             raise StopIteration
-        if self._sender is None:
+        if not self._submitted:
             raise RuntimeError("submit the child's work before reading its items")
         while True:
             try:
@@ -142,9 +176,10 @@ class ChildProcessIterator:
         self._done = True
         proc = self._process
         self._stop.set()
-        self._work.close()  # a child still waiting for its work sees the end of the pipe and exits
-        if proc.pid is not None:
-            if self._sender is None:
+        if self._work is not None:
+            self._work.close()  # a child still waiting for its work sees the end of the pipe and exits
+        if proc is not None and proc.pid is not None:
+            if not self._submitted:
                 proc.terminate()  # no work given: it is only importing, nothing to finish
             proc.join(timeout=1.0)  # it notices the stop when it next sends, within one item
             if proc.exitcode is None:
@@ -171,13 +206,25 @@ class ChildProcessIterator:
 
 
 def in_child_process(factory: Callable[..., Iterable], *args: Any, depth: int = 4, ignore_warnings: bool = False,
-                     **kwargs: Any) -> ChildProcessIterator:
+                     start_method: str = "spawn", **kwargs: Any) -> ChildProcessIterator:
     """The items of `factory(*args, **kwargs)`, made in a child process (`ChildProcessIterator`).
 
     depth: how many items the child may run ahead. ignore_warnings: the child drops Python
     warnings (when this process does the same work first and reports them once).
+    start_method: "spawn" or "fork" (see the module doc).
     """
-    return ChildProcessIterator(depth=depth, ignore_warnings=ignore_warnings).submit(factory, *args, **kwargs)
+    return ChildProcessIterator(depth=depth, ignore_warnings=ignore_warnings,
+                                start_method=start_method).submit(factory, *args, **kwargs)
+
+
+def fork_is_safe() -> bool:
+    """Whether this process may fork a child that goes on working: on Linux (macOS's system
+    libraries do not survive a fork), and with no Python thread running but the main one (a thread
+    holding a lock at the fork would leave it held for ever in the child). OpenGL contexts are the
+    caller's to avoid."""
+    return (sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
+            and threading.active_count() == 1
+            and threading.current_thread() is threading.main_thread())
 
 
 def _portable(exc: BaseException) -> bytes:
@@ -190,10 +237,12 @@ def _portable(exc: BaseException) -> bytes:
         return pickle.dumps(RuntimeError(f"{type(exc).__name__}: {exc}"))
 
 
-def _produce(work, q, stop, ignore_warnings: bool, preload: tuple[str, ...], parent_pid: int) -> None:
-    """The child: import, wait for the work, run the factory, send its items, then the end or the error."""
+def _produce(work, q, stop, ignore_warnings: bool, preload: tuple[str, ...], parent_pid: int, given=None) -> None:
+    """The child: import, wait for the work (or take it as `given`, when forked), run the factory,
+    send its items, then the end or the error."""
     exit_with_parent(parent_pid)  # a parent killed outright cannot stop us: end with it
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # a forked child inherits the CLI's SIGTERM handler: `close` ends it now
     if ignore_warnings:
         warnings.simplefilter("ignore")
     parent = os.getppid()
@@ -211,12 +260,15 @@ def _produce(work, q, stop, ignore_warnings: bool, preload: tuple[str, ...], par
     try:
         for module in preload:
             importlib.import_module(module)
-        try:
-            factory, args, kwargs = pickle.loads(work.recv_bytes())
-        except EOFError:  # closed before it gave any work
-            return
-        finally:
-            work.close()
+        if given is not None:
+            factory, args, kwargs = given
+        else:
+            try:
+                factory, args, kwargs = pickle.loads(work.recv_bytes())
+            except EOFError:  # closed before it gave any work
+                return
+            finally:
+                work.close()
         items = iter(factory(*args, **kwargs))
         try:
             for item in items:

@@ -368,7 +368,7 @@ def _read_model(path: Path, r: _Reader) -> ModelSpec:
     elif "files" in r.table:
         r.fail("files", "not used by open-full-jaw folders (tooth_N.stl names the tooth)", "remove it")
     else:
-        from .openfulljaw import scan_folders
+        from .scanfolders import scan_folders
 
         if not many:
             folders = scan_folders(folder)  # a patient folder stands for its maxilla/ and mandible/

@@ -22,7 +22,6 @@ Each tooth's CEJ is estimated as in `orthosim.meshload.CEJ_RULE`.
 from __future__ import annotations
 
 import json
-import re
 import warnings
 from pathlib import Path
 from typing import Sequence
@@ -34,32 +33,16 @@ from .dentition import Dentition
 from .errors import MeshError
 from .interpenetration import report_rest_interpenetration
 from .meshload import CEJ_RULE, MeshRepairWarning, ToothAxes, load_tooth_mesh, principal_long_axis
+from .scanfolders import _TOOTH_FILE, ARCH_FOLDERS, scan_folders  # noqa: F401 (ARCH_FOLDERS: re-exported)
 from .scanframe import ORIGIN_RULE, place_scan
 
-_TOOTH_FILE = re.compile(r"^tooth_(\d+)\.stl$", re.IGNORECASE)
-ARCH_FOLDERS = ("maxilla", "mandible")
 # A mesh longer than this times its next-widest extent has a principal axis to trust as long axis
 # (patient 26: 1.55-2.4 for the teeth with axes, 1.26-1.28 for the squat lower third molars).
-LONG_AXIS_MIN_RATIO = 1.45  # the dataset's names for a patient's two arch folders
+LONG_AXIS_MIN_RATIO = 1.45
 
 
 class AxesEstimatedWarning(UserWarning):
     """A tooth mesh had no axes entry; its axes were estimated from the mesh (the message names it)."""
-
-
-def scan_folders(folder: str | Path | Sequence[str | Path]) -> list[Path]:
-    """The folders of one scan: `folder` itself, each of a list, or a patient folder's `maxilla/` and `mandible/`."""
-    if isinstance(folder, (str, Path)):
-        folder = Path(folder)
-        if folder.is_dir() and not any(_TOOTH_FILE.match(p.name) for p in folder.iterdir()):
-            arches = [folder / a for a in ARCH_FOLDERS if (folder / a).is_dir()]
-            if arches:
-                return arches
-        return [folder]
-    folders = [Path(f) for f in folder]
-    if not folders:
-        raise MeshError("open-full-jaw", "folders", "is empty", "list the scan's maxilla and/or mandible folders")
-    return folders
 
 
 def load_open_full_jaw(folder: str | Path | Sequence[str | Path]) -> Dentition:

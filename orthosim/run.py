@@ -142,10 +142,6 @@ def validate(case_path: str | Path, out_dir: str | Path, options: RunOptions, ch
     """
     from .case import DETECTORS, load_case
 
-    case = load_case(case_path)
-    detector = options.detector or case.detector
-    if detector not in DETECTORS:
-        raise OptionError("--detector", detector, "is not a detector", f"use one of {', '.join(DETECTORS)}")
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise OptionError(out_dir, None, "exists and is not a folder", "give --out a folder path")
@@ -163,6 +159,11 @@ def validate(case_path: str | Path, out_dir: str | Path, options: RunOptions, ch
         raise OptionError("--fps", str(options.fps), "is not 1 to 120 frames per second", "e.g. --fps 30")
     if options.export_scene is not None and options.export_scene not in SCENE_FORMATS:
         raise OptionError("--export-scene", options.export_scene, "is not a scene format", f"use one of {', '.join(SCENE_FORMATS)}")
+    # the options above stand alone; those below need the case (a mesh model's folders are checked too)
+    case = load_case(case_path)
+    detector = options.detector or case.detector
+    if detector not in DETECTORS:
+        raise OptionError("--detector", detector, "is not a detector", f"use one of {', '.join(DETECTORS)}")
     steps = options.export_steps
     if steps is not None:
         bad = [s for s in steps if not 0 <= s <= case.steps]
@@ -262,6 +263,16 @@ class _Split:
 
 # ------------------------------------------------------------------------------------------ the run
 
+_SIMULATION_MODULES = ("orthosim.run", "orthosim.collision", "orthosim.movement.simulation")
+
+
+def _import_simulation() -> None:
+    """Import what the simulation side runs on (numpy, trimesh, FCL, numba and ours), before a fork."""
+    import importlib
+
+    for name in _SIMULATION_MODULES:
+        importlib.import_module(name)
+
 
 def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = RunOptions(),
              draw: Callable | None = None, check_view: Callable[[str], str] | None = None,
@@ -312,18 +323,33 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
                 dent = case.build_dentition()
                 split, where = _Split(simulation_stream(case, options.detector, out_dir, dentition=dent), log, keep), "in this process"
             else:
-                from .background import ChildProcessIterator
+                from .background import ChildProcessIterator, fork_is_safe
 
-                child = stack.enter_context(ChildProcessIterator(ignore_warnings=True, preload=(
-                    "orthosim.run", "orthosim.collision", "orthosim.movement.simulation")))
                 dent = None
-                if not case.dentition_is_cached():  # built once, here, and cached for the child
+                if fork_is_safe():
+                    # fork: the child starts as a copy of this process, with the simulation's
+                    # imports done and the teeth loaded once; the renderer (and its OpenGL
+                    # context) comes after the fork, in this process only
                     t = time.perf_counter()
+                    _import_simulation()
+                    log.phase("imports", time.perf_counter() - t, "numpy, trimesh, FCL, numba: once, for both processes")
+                    t = time.perf_counter()
+                    cached = case.dentition_is_cached()
                     dent = case.build_dentition()
-                    log.phase("model", time.perf_counter() - t, f"{dent.description}, built and cached")
-                given = dent if dent is not None and not case.dentition_is_cached() else None  # unwritable cache
-                child.submit(simulation_stream, case, options.detector, out_dir, dentition=given)
-                dent = dent or case.build_dentition()
+                    log.phase("model", time.perf_counter() - t,
+                              f"{dent.description}, {'from the cache' if cached else 'built and cached'}")
+                if dent is not None and fork_is_safe():  # still no thread running after the build
+                    child = stack.enter_context(ChildProcessIterator(ignore_warnings=True, start_method="fork"))
+                    child.submit(simulation_stream, case, options.detector, out_dir, dentition=dent)
+                else:
+                    child = stack.enter_context(ChildProcessIterator(ignore_warnings=True, preload=_SIMULATION_MODULES))
+                    if dent is None and not case.dentition_is_cached():  # built once, here, and cached for the child
+                        t = time.perf_counter()
+                        dent = case.build_dentition()
+                        log.phase("model", time.perf_counter() - t, f"{dent.description}, built and cached")
+                    given = dent if dent is not None and not case.dentition_is_cached() else None  # unwritable cache
+                    child.submit(simulation_stream, case, options.detector, out_dir, dentition=given)
+                    dent = dent or case.build_dentition()
                 split, where = _Split(child, log, keep), "beside the drawing"
             rendered = draw(dent, split, out_dir, options, extracted=frozenset(case.extractions), per_step=per_step,
                             total=n_frames, progress=log.bars_shown, case=case)

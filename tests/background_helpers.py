@@ -27,3 +27,15 @@ def endless():
 
 def unpicklable_item():
     yield lambda: None
+
+
+def squares_from_worker_processes(n: int):
+    """Squares computed by a pool of two worker processes started inside the producing child."""
+    import multiprocessing
+
+    with multiprocessing.get_context("fork").Pool(2) as pool:
+        yield from pool.map(_square, range(n))
+
+
+def _square(x: int) -> int:
+    return x * x

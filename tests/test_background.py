@@ -3,6 +3,7 @@ and no process left behind however the run ends."""
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import signal
 import subprocess
@@ -13,13 +14,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orthosim.background import ChildProcessIterator, in_child_process
+from orthosim.background import ChildProcessIterator, fork_is_safe, in_child_process
 from orthosim.case import DEFAULT_CASE, load_case
 from orthosim.collision import exact
 from orthosim.errors import CaseError
 from orthosim.movement.simulation import MovementModel, simulate, simulate_case
 
-from background_helpers import endless, fails_after_two, numbers, unpicklable_item
+from background_helpers import endless, fails_after_two, numbers, squares_from_worker_processes, unpicklable_item
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -57,6 +58,59 @@ def test_a_child_simulation_yields_the_same_records_as_the_simulation_in_this_pr
         assert np.array_equal(a.contact_centers, b.contact_centers) and np.array_equal(a.contact_radii, b.contact_radii)
         assert [(e.pair, e.time, e.impact.keys()) for e in a.collisions] == [(e.pair, e.time, e.impact.keys()) for e in b.collisions]
         assert a.max_penetration_mm == b.max_penetration_mm and a.distances == b.distances
+
+
+@pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(), reason="fork is unavailable here")
+def test_a_forked_child_simulates_a_model_built_here_as_this_process_does_without_pickling_its_work():
+    case = load_case(DEFAULT_CASE)
+    model = MovementModel.build(case)
+    here = list(simulate(model, "continuous", 3))
+    made = []
+
+    def factory():  # a closure over a built model: spawn could not send it, fork finds it in memory
+        made.append(1)
+        return simulate(model, "continuous", 3)
+
+    with in_child_process(factory, start_method="fork") as records:
+        pid = records.pid
+        there = list(records)
+    assert not made  # it ran in the child, not here
+    assert [r.step for r in there] == [r.step for r in here] == [0, 1, 2, 3]
+    for a, b in zip(here, there):
+        assert all(np.array_equal(a.poses[n], b.poses[n]) for n in a.poses)
+        assert a.touching == b.touching and a.distances == b.distances
+    assert _gone(pid)
+
+
+@pytest.mark.parametrize("start_method", ["spawn", "fork"])
+def test_a_child_may_start_worker_processes_of_its_own(start_method):
+    # a drawn `orthosim run` with a cold sphere-tree cache builds the trees over every core inside the child
+    if start_method not in multiprocessing.get_all_start_methods():
+        pytest.skip(f"{start_method} is unavailable here")
+    with in_child_process(squares_from_worker_processes, 5, start_method=start_method) as items:
+        assert list(items) == [0, 1, 4, 9, 16]
+
+
+def test_fork_is_called_safe_only_without_other_python_threads():
+    import threading
+
+    release = threading.Event()
+    worker = threading.Thread(target=release.wait)
+    worker.start()
+    try:
+        assert not fork_is_safe()
+    finally:
+        release.set()
+        worker.join()
+
+
+def test_a_forked_child_given_no_work_starts_nothing_and_closes_cleanly():
+    with ChildProcessIterator(start_method="fork") as child:
+        assert child.pid is None
+    with pytest.raises(ValueError, match="start_method"):
+        ChildProcessIterator(start_method="forkserver")
+    with pytest.raises(ValueError, match="preload"):
+        ChildProcessIterator(start_method="fork", preload=["numpy"])
 
 
 def test_an_error_in_the_child_is_raised_here_as_the_same_error_after_the_items_before_it():

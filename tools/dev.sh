@@ -38,6 +38,9 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ tools/overrides.txt
     .venv/bin/uv pip install -q --compile-bytecode --python .venv/bin/python --override tools/overrides.txt -e '.[test]'
     touch "$stamp"
 fi
+# our own sources are an editable install, which uv does not compile: without their .pyc files every
+# process compiles orthosim and render again (0.19 s of CPU per process, measured); up-to-date files are skipped
+.venv/bin/python -m compileall -q orthosim render >/dev/null
 
 export PYOPENGL_PLATFORM=osmesa
 case "$action" in
