@@ -14,6 +14,7 @@ importer, `orthosim.openfulljaw`, uses it with the dataset's own axes). All leng
 
 from __future__ import annotations
 
+import io
 import re
 import warnings
 from dataclasses import dataclass
@@ -85,7 +86,11 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
         raise MeshError(where, None, f"unsupported mesh format '{path.suffix}'", "convert it to STL, OBJ or PLY")
     try:
         # process=False: repairs below are done step by step so each one can be reported.
-        mesh = trimesh.load(str(path), force="mesh", process=False)
+        text_safe = _ascii_safe_bytes(path)
+        if text_safe is None:
+            mesh = trimesh.load(str(path), force="mesh", process=False)
+        else:
+            mesh = trimesh.load(io.BytesIO(text_safe), file_type=path.suffix.lower()[1:], force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for a corrupt file; all mean "unreadable"
         raise MeshError(where, None, f"cannot be read as a mesh ({type(exc).__name__}: {exc})",
                         "re-export it as a binary STL") from None
@@ -161,6 +166,35 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
     if repaired:
         warnings.warn(f"{where}: repaired mesh: {'; '.join(repaired)}", MeshRepairWarning, stacklevel=2)
     return mesh
+
+
+def _ascii_safe_bytes(path: Path) -> bytes | None:
+    """The file's bytes with the non-ASCII bytes of its text part made `?`, or None when it needs no such care.
+
+    The text of an ASCII STL, an OBJ or a PLY header is keywords and numbers, all ASCII; only names
+    and comments carry other bytes (an exporter's `solid Zahn_\xe4` in Latin-1, say). trimesh decodes
+    text that is not UTF-8 by guessing its encoding with charset_normalizer, which it does not
+    install; a guess is not needed when the geometry cannot hold such bytes, so they become `?`,
+    byte for byte (lengths kept, a binary PLY body left alone).
+    """
+    suffix = path.suffix.lower()
+    data = path.read_bytes()
+    if suffix == ".stl" and len(data) >= 84 and len(data) == 84 + 50 * int.from_bytes(data[80:84], "little"):
+        return None  # binary STL: its 80-byte header is never decoded
+    text_end = len(data)
+    if suffix == ".ply":
+        end = data.find(b"end_header")
+        text_end = len(data) if end < 0 else end
+    text = data[:text_end]
+    if text.isascii():
+        return None
+    try:
+        text.decode("utf-8")
+        return None
+    except UnicodeDecodeError:
+        pass
+    codes = np.frombuffer(text, np.uint8)
+    return np.where(codes < 0x80, codes, ord("?")).astype(np.uint8).tobytes() + data[text_end:]
 
 
 def _check_units(mesh: trimesh.Trimesh, where: str, scale: float) -> None:

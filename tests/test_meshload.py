@@ -332,3 +332,55 @@ def test_nan_vertex_in_an_stl_drops_its_face_and_refills_it(tmp_path):
     with pytest.warns(MeshRepairWarning, match="nan.stl.*NaN.*filled"):
         loaded = load_tooth_mesh(path)
     assert np.isfinite(loaded.vertices).all() and loaded.is_watertight and loaded.volume > 0
+
+
+# ---------------------------------------------------------------- text that is not UTF-8
+
+
+def _latin1_named(text: str, keyword: str, name: str = "Zahn_\xe4\xf6\xfc_Patient_M\xfcller") -> bytes:
+    """`text` with a Latin-1 name after its first `keyword` (as a European exporter writes it): not UTF-8."""
+    data = text.replace(keyword, f"{keyword} {name}", 1).encode("latin-1")
+    with pytest.raises(UnicodeDecodeError):
+        data.decode("utf-8")
+    return data
+
+
+def test_ascii_stl_with_a_latin1_solid_name_loads_with_its_geometry(tmp_path):
+    tooth = _tooth_shape()
+    path = tmp_path / "zahn_11.stl"
+    path.write_bytes(_latin1_named(trimesh.exchange.stl.export_stl_ascii(tooth), "solid"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a clean tooth: nothing to repair, nothing to say
+        loaded = load_tooth_mesh(path)
+    assert len(loaded.faces) == len(tooth.faces)
+    np.testing.assert_allclose(loaded.bounds, tooth.bounds, atol=1e-5)
+    assert loaded.volume == pytest.approx(tooth.volume, rel=1e-5)
+
+
+def test_obj_with_a_latin1_comment_loads_with_its_geometry(tmp_path):
+    tooth = _tooth_shape()
+    path = tmp_path / "zahn_11.obj"
+    path.write_bytes(_latin1_named("# exported\n" + trimesh.exchange.obj.export_obj(tooth), "# exported"))
+    loaded = load_tooth_mesh(path)
+    assert len(loaded.faces) == len(tooth.faces) and loaded.volume == pytest.approx(tooth.volume, rel=1e-5)
+
+
+@pytest.mark.parametrize("encoding", ["ascii", "binary_little_endian"])
+def test_ply_with_a_latin1_header_comment_loads_with_its_geometry(tmp_path, encoding):
+    tooth = _tooth_shape()
+    data = trimesh.exchange.ply.export_ply(tooth, encoding=encoding.split("_")[0])
+    magic, form, rest = data.split(b"\n", 2)  # "ply", the format line, then the rest of the header
+    path = tmp_path / "zahn_11.ply"
+    path.write_bytes(magic + b"\n" + form + b"\n" + _latin1_named("comment\n", "comment") + rest)
+    loaded = load_tooth_mesh(path)
+    assert len(loaded.faces) == len(tooth.faces) and loaded.volume == pytest.approx(tooth.volume, rel=1e-5)
+
+
+def test_binary_stl_with_a_latin1_header_keeps_its_geometry(tmp_path):
+    tooth = _tooth_shape()
+    data = bytearray(trimesh.exchange.stl.export_stl(tooth))
+    data[:80] = "Zahn \xe4\xf6\xfc solid".encode("latin-1").ljust(80, b" ")  # a binary header may start with anything
+    path = tmp_path / "zahn_11.stl"
+    path.write_bytes(bytes(data))
+    loaded = load_tooth_mesh(path)
+    assert len(loaded.faces) == len(tooth.faces) and loaded.volume == pytest.approx(tooth.volume, rel=1e-6)
