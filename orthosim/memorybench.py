@@ -35,6 +35,7 @@ class PeakMemory:
 
     peak_mb: float  # max(summed tree RSS sampled, largest single-process high-water mark), MB
     tree_rss_sampled_peak_mb: float  # summed RSS of the process tree, highest sample, MB
+    tree_pss_sampled_peak_mb: float  # summed PSS (shared pages split, not counted once per process), highest sample, MB
     largest_process_peak_mb: float  # the largest VmHWM of one process of the tree, MB
     processes_seen: int  # distinct processes of the tree seen while sampling
     samples: int
@@ -68,6 +69,18 @@ def _rss_and_hwm_kb(pid: int) -> tuple[int, int]:
     return rss, hwm
 
 
+def _pss_kb(pid: int) -> int:
+    """Proportional set size of a process, kB (each shared page split among the processes sharing it); 0 once gone."""
+    try:
+        with open(f"/proc/{pid}/smaps_rollup") as f:
+            for line in f:
+                if line.startswith("Pss:"):
+                    return int(line.split()[1])
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0
+
+
 def _tree(pid: int) -> list[int]:
     seen, todo = [], [pid]
     while todo:
@@ -88,7 +101,7 @@ def measure_peak_memory(argv: list[str], *, cwd: str | Path | None = None, env: 
     t0 = time.perf_counter()
     proc = subprocess.Popen(argv, cwd=cwd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
-    tree_kb, hwm_kb, samples, seen = 0, {}, 0, set()
+    tree_kb, pss_kb, hwm_kb, samples, seen = 0, 0, {}, 0, set()
     deadline = time.monotonic() + timeout_s
     while proc.poll() is None:
         pids = _tree(proc.pid)
@@ -99,6 +112,7 @@ def measure_peak_memory(argv: list[str], *, cwd: str | Path | None = None, env: 
             total += rss
             hwm_kb[p] = max(hwm_kb.get(p, 0), hwm)
         tree_kb = max(tree_kb, total)
+        pss_kb = max(pss_kb, sum(_pss_kb(p) for p in pids))
         samples += 1
         if time.monotonic() > deadline:
             proc.kill()
@@ -107,6 +121,7 @@ def measure_peak_memory(argv: list[str], *, cwd: str | Path | None = None, env: 
         time.sleep(interval_s)
     tree_mb, largest_mb = tree_kb / 1024.0, max(hwm_kb.values(), default=0) / 1024.0
     return PeakMemory(peak_mb=max(tree_mb, largest_mb), tree_rss_sampled_peak_mb=tree_mb,
+                      tree_pss_sampled_peak_mb=pss_kb / 1024.0,
                       largest_process_peak_mb=largest_mb, processes_seen=len(seen), samples=samples,
                       wall_s=time.perf_counter() - t0, exit_code=proc.returncode)
 
