@@ -38,6 +38,7 @@ class PeakMemory:
     tree_pss_sampled_peak_mb: float  # summed PSS (shared pages split, not counted once per process), highest sample, MB
     largest_process_peak_mb: float  # the largest VmHWM of one process of the tree, MB
     processes_seen: int  # distinct processes of the tree seen while sampling
+    process_peaks_mb: tuple[tuple[str, float], ...]  # (command name, VmHWM MB) of each process seen, largest first
     samples: int
     wall_s: float
     exit_code: int
@@ -81,6 +82,16 @@ def _pss_kb(pid: int) -> int:
     return 0
 
 
+def _command(pid: int) -> str:
+    """The start of a process's command line (program name and its first arguments), for the record."""
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            words = [w.decode(errors="replace") for w in f.read().split(b"\0") if w]
+        return " ".join([os.path.basename(words[0]), *words[1:4]]).replace("\n", " ")[:100] if words else "?"
+    except OSError:
+        return "?"
+
+
 def _tree(pid: int) -> list[int]:
     seen, todo = [], [pid]
     while todo:
@@ -101,13 +112,15 @@ def measure_peak_memory(argv: list[str], *, cwd: str | Path | None = None, env: 
     t0 = time.perf_counter()
     proc = subprocess.Popen(argv, cwd=cwd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
-    tree_kb, pss_kb, hwm_kb, samples, seen = 0, 0, {}, 0, set()
+    tree_kb, pss_kb, hwm_kb, samples, seen, names = 0, 0, {}, 0, set(), {}
     deadline = time.monotonic() + timeout_s
     while proc.poll() is None:
         pids = _tree(proc.pid)
         seen.update(pids)
         total = 0
         for p in pids:
+            if p not in names:
+                names[p] = _command(p)
             rss, hwm = _rss_and_hwm_kb(p)
             total += rss
             hwm_kb[p] = max(hwm_kb.get(p, 0), hwm)
@@ -122,7 +135,10 @@ def measure_peak_memory(argv: list[str], *, cwd: str | Path | None = None, env: 
     tree_mb, largest_mb = tree_kb / 1024.0, max(hwm_kb.values(), default=0) / 1024.0
     return PeakMemory(peak_mb=max(tree_mb, largest_mb), tree_rss_sampled_peak_mb=tree_mb,
                       tree_pss_sampled_peak_mb=pss_kb / 1024.0,
-                      largest_process_peak_mb=largest_mb, processes_seen=len(seen), samples=samples,
+                      largest_process_peak_mb=largest_mb, processes_seen=len(seen),
+                      process_peaks_mb=tuple(sorted(((names.get(p, "?"), kb / 1024.0) for p, kb in hwm_kb.items()),
+                                                    key=lambda item: -item[1])),
+                      samples=samples,
                       wall_s=time.perf_counter() - t0, exit_code=proc.returncode)
 
 
