@@ -32,3 +32,14 @@ def test_a_bad_option_is_one_line_before_the_model_or_any_child_process(tmp_path
     assert len(lines) == 1 and named in lines[0], r.stderr
     assert "Traceback" not in r.stderr and "leaked" not in r.stderr
     assert not out.exists() and not list(tmp_path.glob(".o.*"))  # no folder, no staging folder beside it
+
+
+def test_an_out_folder_that_cannot_be_made_is_one_line_before_the_model(tmp_path):
+    # tests run as root, where permission bits do not stop a write; a file where a parent folder
+    # should be stops it for anyone
+    (tmp_path / "notes.txt").write_text("x")
+    r = orthosim("run", quick_case(tmp_path), "--out", tmp_path / "notes.txt" / "run", "--verbose", "--no-render")
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--out" in lines[0] and "not a folder" in lines[0], r.stderr
+    assert (tmp_path / "notes.txt").read_text() == "x"
