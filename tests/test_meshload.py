@@ -427,6 +427,7 @@ def test_a_mesh_above_the_budget_is_simplified_to_it_with_one_message_and_keeps_
     simplified, messages = _load_counting_messages(path, max_triangles=20_000)
     assert len(simplified.faces) <= 20_000
     assert simplified.metadata["triangles_in_file"] == len(dense.faces)
+    assert 0 < simplified.metadata["simplify_tolerance_mm"] <= 0.02
     assert len(messages) == 1  # one line: the file, the count, the budget and how to change it
     text = str(messages[0].message)
     assert "\n" not in text
