@@ -49,6 +49,7 @@ class ModelSpec:
     scale: float = 1.0  # meshes: multiply coordinates (e.g. 1000 for metres)
     folders: tuple[Path, ...] = ()  # open-full-jaw: the scan's folders (maxilla, mandible), one transform
     frame: str = "arch"  # meshes: "arch" (already in the arch frame) or "scan" (fit one rigid transform)
+    max_triangles_per_tooth: int | None = None  # meshes / open-full-jaw: simplify above it (None: meshload's default)
 
     def present_teeth(self) -> set[int]:
         """FDI numbers the model will have, known without loading any mesh."""
@@ -130,18 +131,20 @@ class Case:
     def _mesh_model_key(self) -> tuple[dict, list[Path]]:
         """(parameters, input files) that decide a mesh model: the dentition cache's key."""
         m = self.model
+        budget = {} if m.max_triangles_per_tooth is None else {"max_triangles_per_tooth": m.max_triangles_per_tooth}
         if m.kind == "meshes":
-            return {"kind": m.kind, "files": m.files, "scale": m.scale}, [m.folder / f for f in m.files]
-        return {"kind": m.kind}, sorted(p for p in m.folder.iterdir() if p.is_file())
+            return {"kind": m.kind, "files": m.files, "scale": m.scale, **budget}, [m.folder / f for f in m.files]
+        return {"kind": m.kind, **budget}, sorted(p for p in m.folder.iterdir() if p.is_file())
 
     def _load_meshes(self):
         from . import meshload
 
         m = self.model
+        budget = meshload.DEFAULT_MAX_TRIANGLES if m.max_triangles_per_tooth is None else m.max_triangles_per_tooth
         if m.kind == "meshes":
-            dent = meshload.load_mesh_folder(m.folder, m.files, scale=m.scale, frame=m.frame)
+            dent = meshload.load_mesh_folder(m.folder, m.files, scale=m.scale, frame=m.frame, max_triangles=budget)
         else:
-            dent = meshload.load_open_full_jaw(list(m.folders) or m.folder)
+            dent = meshload.load_open_full_jaw(list(m.folders) or m.folder, max_triangles=budget)
         if m.diastema_mm:
             from .dentition import open_midline_space
 
@@ -233,7 +236,9 @@ def _ranges(teeth: set[int]) -> str:
 
 _TOP = ("case", "model", "treatment", "wire", "loads", "simulation", "start", "target")
 _CASE = ("name", "description")
-_MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files", "scale", "frame")
+_MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files", "scale", "frame",
+          "max_triangles_per_tooth")
+MIN_TRIANGLES_PER_TOOTH = 10_000  # fewer would flatten a molar's cusps and fossae (the smooth parametric molar has 7,000)
 FRAMES = ("arch", "scan")
 _TREATMENT = ("extractions", "duration_days", "step_days", "detector")
 _WIRE = ("type",)
@@ -317,7 +322,7 @@ def _read_simulation(r: _Reader) -> Simulation:
 def _read_model(path: Path, r: _Reader) -> ModelSpec:
     kind = r.string("kind", "parametric", MODEL_KINDS)
     if kind == "parametric":
-        for key in ("folder", "files", "scale", "frame"):
+        for key in ("folder", "files", "scale", "frame", "max_triangles_per_tooth"):
             if key in r.table:
                 r.fail(key, "applies only to mesh models", "remove it, or set kind = \"meshes\"")
         resolution = r.get("resolution", "smooth")
@@ -376,8 +381,13 @@ def _read_model(path: Path, r: _Reader) -> ModelSpec:
             if not any(f.glob("tooth_*.stl")):
                 r.fail(f"folder[{i}]" if many else "folder", f"no tooth_N.stl files in {f}",
                        "point it at an Open-Full-Jaw maxilla or mandible folder, or the patient folder holding both")
+    budget = r.get("max_triangles_per_tooth")
+    if budget is not None and (isinstance(budget, bool) or not isinstance(budget, int) or budget < MIN_TRIANGLES_PER_TOOTH):
+        r.fail("max_triangles_per_tooth", f"must be a whole number of at least {MIN_TRIANGLES_PER_TOOTH:,}, got {budget!r}",
+               "write e.g. 100000 (the default), or leave it out")
     return ModelSpec(kind, diastema_mm=diastema, folder=folder, files=files, scale=r.number("scale", 1.0, positive=True),
-                     folders=tuple(folders) if kind == "open-full-jaw" else (), frame=frame)
+                     folders=tuple(folders) if kind == "open-full-jaw" else (), frame=frame,
+                     max_triangles_per_tooth=budget)
 
 
 def _shared_data_fallback(raw: str, folder: Path) -> Path:

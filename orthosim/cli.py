@@ -205,13 +205,14 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--no-staging", is_flag=True, help="Skip timing the aligner staging planner (shipped staging cases, 28-tooth set-up).")
 @click.option("--no-batch", is_flag=True, help="Skip `orthosim batch` animations per minute with 1 and 2 workers (minutes).")
 @click.option("--no-report", is_flag=True, help="Skip timing `orthosim report` of the paper's three cases.")
+@click.option("--no-memory", is_flag=True, help="Skip the peak memory of a 10,000-step run and a 2,000-frame render (minutes).")
 @click.option("--report-runs", type=click.Path(path_type=Path), default=Path("out/bench/report-runs"), show_default=True,
               help="Where the report's runs are made once and kept for later benches.")
 @click.option("--step-days", default=2.0, show_default=True, type=click.FloatRange(min=0.01),
               help="Simulation step for the bench, so the case's teeth keep moving through the measured frames.")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
           no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool,
-          no_staging: bool, no_batch: bool, no_report: bool, report_runs: Path) -> None:
+          no_staging: bool, no_batch: bool, no_report: bool, report_runs: Path, no_memory: bool) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -223,7 +224,8 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
     record = run_bench(case, frames=frames, warmup=warmup, size=size, n_markers=markers,
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
                        step_days=step_days, tree_build=not no_tree_build, startup=not no_startup,
-                       staging=not no_staging, batch=not no_batch, report=not no_report, report_runs=report_runs)
+                       staging=not no_staging, batch=not no_batch, report=not no_report, report_runs=report_runs,
+                       memory=not no_memory)
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
@@ -250,6 +252,10 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
     if b:
         click.echo(f"batch: {b['per_minute_1_worker']:.2f} animations/min with 1 worker, {b['per_minute_2_workers']:.2f} "
                    f"with 2 (x{b['ratio_2_to_1']:.2f}, target x{b['target_ratio_2_to_1']})")
+    m = record.get("memory")
+    if m:
+        click.echo(f"peak memory: {m['run_10k_steps_no_render_mb']:.0f} MB for {m['run_no_render']['steps']} steps without "
+                   f"rendering, {m['render_2000_frames_mb']:.0f} MB for {m['render']['frames']} frames (target {m['target_mb']:.0f} MB)")
 
 
 

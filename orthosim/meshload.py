@@ -14,6 +14,7 @@ importer, `orthosim.openfulljaw`, uses it with the dataset's own axes). All leng
 
 from __future__ import annotations
 
+import io
 import re
 import warnings
 from dataclasses import dataclass
@@ -44,6 +45,15 @@ MAX_PCA_TILT_DEG = 60.0
 # Separate pieces beside the main body are dropped (with a warning) only up to this volume fraction.
 MAX_DROPPED_VOLUME = 0.02
 
+# Triangles a tooth may have before it is simplified (case files: [model] max_triangles_per_tooth).
+# The densest real teeth in use (Open-Full-Jaw, CBCT, 0.18 mm edges) have 16,000-45,000; the sphere
+# trees, the exact meshes and the drawing gain nothing from more, while a scan exported at millions
+# of triangles would make every phase take minutes.
+DEFAULT_MAX_TRIANGLES = 100_000
+# The largest edge-collapse tolerance used to meet the budget (mm). The surface moved by up to about
+# 2.6 times the tolerance in our measurements, so a simplified tooth stays within about 0.05 mm.
+MAX_SIMPLIFY_TOLERANCE_MM = 0.02
+
 CEJ_RULE = (
     "CEJ on the long axis at (occlusal-most point of the mesh along the axis) minus the Wheeler "
     "crown height of the tooth type (orthosim.anatomy); root length = extent of the mesh below it"
@@ -52,6 +62,10 @@ CEJ_RULE = (
 
 class MeshRepairWarning(UserWarning):
     """A tooth mesh was repaired on load; the message names the file and what was changed."""
+
+
+class MeshSimplifiedWarning(MeshRepairWarning):
+    """A tooth mesh above the triangle budget is being simplified; the message names the file, the counts and the fix."""
 
 
 @dataclass(frozen=True)
@@ -68,12 +82,17 @@ class ToothAxes:
     point: np.ndarray | None = None  # (3,) arch frame, mm, a point on the long axis
 
 
-def load_tooth_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
+def load_tooth_mesh(path: str | Path, scale: float = 1.0,
+                    max_triangles: int | None = DEFAULT_MAX_TRIANGLES) -> trimesh.Trimesh:
     """Read one tooth mesh (STL, OBJ or PLY), multiply by `scale`, validate it, repair it if safe.
 
     Returns a closed mesh with consistent outward winding (positive volume), in mm. Repairs are
     reported with a `MeshRepairWarning`; anything unrepairable, or a size that is not a tooth's in
-    millimetres, raises `MeshError` naming the file and the fix.
+    millimetres, raises `MeshError` naming the file and the fix. A mesh of more than
+    `max_triangles` triangles (None: no limit) is simplified to at most that many by edge
+    collapse (`simplify_to_budget`), announced by a `MeshSimplifiedWarning` before the work starts;
+    the result's `metadata` keeps the file's count (`triangles_in_file`) and, when simplified, how
+    far the surface may have moved (`simplify_tolerance_mm`).
     """
     path = Path(path)
     where = str(path)
@@ -85,7 +104,11 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
         raise MeshError(where, None, f"unsupported mesh format '{path.suffix}'", "convert it to STL, OBJ or PLY")
     try:
         # process=False: repairs below are done step by step so each one can be reported.
-        mesh = trimesh.load(str(path), force="mesh", process=False)
+        text_safe = _ascii_safe_bytes(path)
+        if text_safe is None:
+            mesh = trimesh.load(str(path), force="mesh", process=False)
+        else:
+            mesh = trimesh.load(io.BytesIO(text_safe), file_type=path.suffix.lower()[1:], force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for a corrupt file; all mean "unreadable"
         raise MeshError(where, None, f"cannot be read as a mesh ({type(exc).__name__}: {exc})",
                         "re-export it as a binary STL") from None
@@ -108,6 +131,13 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
     mesh.remove_unreferenced_vertices()
 
     _check_units(mesh, where, scale)
+    in_file = len(mesh.faces)
+    if max_triangles is not None and in_file > max_triangles:
+        # said before the work: merging and simplifying millions of triangles takes seconds to a minute
+        warnings.warn(f"{where}: {in_file:,} triangles, above the budget of {max_triangles:,} a tooth: "
+                      f"simplifying it to at most {max_triangles:,} (closed, edge-collapse tolerance at most {MAX_SIMPLIFY_TOLERANCE_MM:g} mm); "
+                      "set [model] max_triangles_per_tooth in the case file to change the budget",
+                      MeshSimplifiedWarning, stacklevel=2)
 
     # An STL is a triangle soup: merging coincident vertices is how it is read, not a repair.
     mesh.merge_vertices()
@@ -120,10 +150,18 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
         repaired.append(f"dropped {int((~keep).sum())} duplicate faces")
         mesh.update_faces(keep)
     mesh.remove_unreferenced_vertices()
+    full = None
+    if max_triangles is not None and len(mesh.faces) > max_triangles:
+        full, mesh = mesh, simplify_to_budget(mesh, max_triangles, where)
+        tolerance = mesh.metadata["simplify_tolerance_mm"]
     if len(mesh.faces) < 4:
         raise MeshError(where, None, "has fewer than 4 valid triangles, so it cannot enclose a volume",
                         "re-export the tooth as a closed mesh")
 
+    if full is not None and not mesh.is_watertight and full.is_watertight:
+        raise MeshError(where, None, f"simplifying its {in_file:,} triangles to {max_triangles:,} opened holes in it",
+                        f"simplify it in a mesh editor (e.g. MeshLab 'Quadric Edge Collapse Decimation', preserve "
+                        f"topology) to under {max_triangles:,} triangles, or raise [model] max_triangles_per_tooth")
     if not mesh.is_watertight:
         before = len(mesh.faces)
         trimesh.repair.fill_holes(mesh)  # fills only triangle and quad holes: safe, shape kept
@@ -160,7 +198,81 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0) -> trimesh.Trimesh:
 
     if repaired:
         warnings.warn(f"{where}: repaired mesh: {'; '.join(repaired)}", MeshRepairWarning, stacklevel=2)
+    mesh.metadata["triangles_in_file"] = in_file
+    if full is not None:
+        mesh.metadata["simplify_tolerance_mm"] = tolerance
     return mesh
+
+
+def simplify_to_budget(mesh: trimesh.Trimesh, max_triangles: int, where: str) -> trimesh.Trimesh:
+    """`mesh` (closed, vertices merged, mm) simplified to at most `max_triangles` triangles, its shape kept.
+
+    manifold3d's `simplify` (already orthosim's boolean engine) collapses only edges whose removal
+    keeps the surface within a tolerance, and keeps the mesh closed and manifold; the tolerance is
+    the smallest that meets the budget (0.0001 mm x 4^k up to `MAX_SIMPLIFY_TOLERANCE_MM`, then
+    three halvings of the last step in log scale), recorded in the result's
+    `metadata["simplify_tolerance_mm"]`. A mesh that needs more is refused.
+    (fast-simplification, a quadric decimator by count, was measured and not kept: on a molar
+    loop-subdivided to 1.8 M triangles it stalled near 120,000 whatever the target or aggression,
+    and it bounds no distance.)
+    """
+    import manifold3d
+
+    solid = manifold3d.Manifold(manifold3d.Mesh(vert_properties=np.asarray(mesh.vertices, np.float32),
+                                                tri_verts=np.asarray(mesh.faces, np.uint32)))
+    if solid.status() != manifold3d.Error.NoError:
+        raise MeshError(where, None, f"cannot be simplified to {max_triangles:,} triangles: it is not a closed "
+                        "manifold surface", "repair it in a mesh editor, or raise [model] max_triangles_per_tooth "
+                        "in the case file")
+    tolerance, too_small = 1e-4, None  # mm: far below a scanner's resolution; the budget decides how far it grows
+    while (smaller := solid.simplify(tolerance)).num_tri() > max_triangles:
+        if tolerance >= MAX_SIMPLIFY_TOLERANCE_MM:
+            raise MeshError(where, None, f"cannot be simplified to {max_triangles:,} triangles with an edge-collapse "
+                            f"tolerance of {MAX_SIMPLIFY_TOLERANCE_MM:g} mm", "simplify it in a mesh "
+                            "editor, or raise [model] max_triangles_per_tooth in the case file")
+        too_small, tolerance = tolerance, min(tolerance * 4, MAX_SIMPLIFY_TOLERANCE_MM)
+    if too_small is not None:  # narrow the step that crossed the budget: keep as much of the surface as it allows
+        for _ in range(3):
+            middle = (too_small * tolerance) ** 0.5
+            candidate = solid.simplify(middle)
+            if candidate.num_tri() <= max_triangles:
+                smaller, tolerance = candidate, middle
+            else:
+                too_small = middle
+    out = smaller.to_mesh()
+    simplified = trimesh.Trimesh(np.asarray(out.vert_properties[:, :3], np.float64),
+                                 np.asarray(out.tri_verts, np.int64), process=False)
+    simplified.metadata["simplify_tolerance_mm"] = tolerance
+    return simplified
+
+
+def _ascii_safe_bytes(path: Path) -> bytes | None:
+    """The file's bytes with the non-ASCII bytes of its text part made `?`, or None when it needs no such care.
+
+    The text of an ASCII STL, an OBJ or a PLY header is keywords and numbers, all ASCII; only names
+    and comments carry other bytes (an exporter's `solid Zahn_\xe4` in Latin-1, say). trimesh decodes
+    text that is not UTF-8 by guessing its encoding with charset_normalizer, which it does not
+    install; a guess is not needed when the geometry cannot hold such bytes, so they become `?`,
+    byte for byte (lengths kept, a binary PLY body left alone).
+    """
+    suffix = path.suffix.lower()
+    data = path.read_bytes()
+    if suffix == ".stl" and len(data) >= 84 and len(data) == 84 + 50 * int.from_bytes(data[80:84], "little"):
+        return None  # binary STL: its 80-byte header is never decoded
+    text_end = len(data)
+    if suffix == ".ply":
+        end = data.find(b"end_header")
+        text_end = len(data) if end < 0 else end
+    text = data[:text_end]
+    if text.isascii():
+        return None
+    try:
+        text.decode("utf-8")
+        return None
+    except UnicodeDecodeError:
+        pass
+    codes = np.frombuffer(text, np.uint8)
+    return np.where(codes < 0x80, codes, ord("?")).astype(np.uint8).tobytes() + data[text_end:]
 
 
 def _check_units(mesh: trimesh.Trimesh, where: str, scale: float) -> None:
@@ -330,6 +442,7 @@ def load_mesh_folder(
     axes: dict[int, ToothAxes] | None = None,
     description: str = "",
     frame: str = "arch",
+    max_triangles: int | None = DEFAULT_MAX_TRIANGLES,
 ) -> Dentition:
     """A `Dentition` from a folder of per-tooth meshes (mm), in the arch frame or in one scan's frame.
 
@@ -342,7 +455,8 @@ def load_mesh_folder(
     the folder is used and its FDI number is the last number in its name (`11.stl`,
     `tooth_21.obj`, `UL6_26.ply`). `axes`: optional FDI -> `ToothAxes` (arch frame); teeth without
     one get axes from `estimate_axes` (PCA long axis toward the occlusal plane, labial away from
-    the centroid of their arch). `scale` multiplies every mesh (e.g. 1000 for metres).
+    the centroid of their arch). `scale` multiplies every mesh (e.g. 1000 for metres). A mesh of
+    more than `max_triangles` triangles is simplified to that budget (`load_tooth_mesh`).
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -361,7 +475,7 @@ def load_mesh_folder(
                             "map each tooth number to one file")
         files[number] = folder / name
 
-    meshes = {n: load_tooth_mesh(p, scale=scale) for n, p in files.items()}
+    meshes = {n: load_tooth_mesh(p, scale=scale, max_triangles=max_triangles) for n, p in files.items()}
     if frame == "scan":
         from .interpenetration import report_rest_interpenetration
         from .scanframe import ORIGIN_RULE, place_scan
@@ -420,8 +534,8 @@ def _unit(v: np.ndarray, where: str, what: str) -> np.ndarray:
     return v / n
 
 
-def load_open_full_jaw(folder: str | Path) -> Dentition:
+def load_open_full_jaw(folder: str | Path, max_triangles: int | None = DEFAULT_MAX_TRIANGLES) -> Dentition:
     """Convenience alias of `orthosim.openfulljaw.load_open_full_jaw` (see there)."""
     from .openfulljaw import load_open_full_jaw as load
 
-    return load(folder)
+    return load(folder, max_triangles=max_triangles)

@@ -32,7 +32,7 @@ from . import fdi as fdi_mod
 from .dentition import Dentition
 from .errors import MeshError
 from .interpenetration import report_rest_interpenetration
-from .meshload import CEJ_RULE, MeshRepairWarning, ToothAxes, load_tooth_mesh, principal_long_axis
+from .meshload import CEJ_RULE, DEFAULT_MAX_TRIANGLES, MeshRepairWarning, ToothAxes, load_tooth_mesh, principal_long_axis
 from .scanfolders import _TOOTH_FILE, ARCH_FOLDERS, scan_folders  # noqa: F401 (ARCH_FOLDERS: re-exported)
 from .scanframe import ORIGIN_RULE, place_scan
 
@@ -45,14 +45,16 @@ class AxesEstimatedWarning(UserWarning):
     """A tooth mesh had no axes entry; its axes were estimated from the mesh (the message names it)."""
 
 
-def load_open_full_jaw(folder: str | Path | Sequence[str | Path]) -> Dentition:
+def load_open_full_jaw(folder: str | Path | Sequence[str | Path],
+                       max_triangles: int | None = DEFAULT_MAX_TRIANGLES) -> Dentition:
     """A `Dentition` in the arch frame from Open-Full-Jaw folders of one scan (`tooth_N.stl` + `teeth_axes_*.json`).
 
     `folder`: one folder, a list of folders of the same scan, or a patient folder holding
     `maxilla/` and `mandible/`. `info` records the source folders, `scan_to_arch` (4x4 rigid
     transform, scan frame -> arch frame, mm), the origin and CEJ rules, the Universal -> FDI
     numbering used, the teeth whose axes were estimated, the measured sense of the json `x` axes
-    and the scan's interpenetrating pairs (`rest_interpenetration_mm`).
+    and the scan's interpenetrating pairs (`rest_interpenetration_mm`). A tooth of more than
+    `max_triangles` triangles is simplified to that budget (`orthosim.meshload.load_tooth_mesh`).
     """
     folders = scan_folders(folder)
     where = folders[0] if len(folders) == 1 else " + ".join(str(f) for f in folders)
@@ -90,7 +92,7 @@ def load_open_full_jaw(folder: str | Path | Sequence[str | Path]) -> Dentition:
     x_end, meshes = {}, {}
     for universal, path in files.items():
         n = fdi_of[universal]
-        meshes[n] = load_tooth_mesh(path)
+        meshes[n] = load_tooth_mesh(path, max_triangles=max_triangles)
         if str(universal) not in axes_raw:
             continue
         axes_file = axes_file_of[str(universal)]

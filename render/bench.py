@@ -30,7 +30,9 @@ machine does not move the figure; the end-to-end records also give frames / tota
   - staging_s: planning time of `orthosim stage` on each shipped staging case and on a 28-tooth
     set-up of 30 stages (target: under 10 s; `orthosim.staging.bench`);
   - memory_mb: resident set size before and after a long (default 2,000 frames) update+render
-    run: leaked GL programs or buffers would show there.
+    run: leaked GL programs or buffers would show there;
+  - memory: peak MB of `orthosim run` for 10,000 steps without rendering and drawn into 2,000
+    frames, each in a fresh child process (`orthosim.memorybench`, target under 500 MB each).
 Components that are missing are reported as null with a "pending" note, never estimated.
 """
 
@@ -207,7 +209,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
               variant_rounds: int = 4, collision_repeats: int = 20, work_dir: str | Path | None = None,
               png: bool = True, frames_per_step: int = 6, step_days: float | None = 2.0,
               tree_build: bool = True, startup: bool = True, staging: bool = True, batch: bool = False,
-              report: bool = False, report_runs: str | Path | None = None) -> dict:
+              report: bool = False, report_runs: str | Path | None = None, memory: bool = False) -> dict:
     """Measure and return the bench record (see the module docstring and the output contract).
 
     The model is `dentition` when given (then nothing is simulated), else the case's (default:
@@ -468,6 +470,11 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
                       "long_run_frames": memory_frames, "long_run_fps": long_fps},
         "wall_s": time.perf_counter() - t_start,
     }
+    if memory:  # peak memory of a 10,000-step run and a 2,000-frame render, each in a fresh child process
+        from orthosim.memorybench import memory_timings
+
+        record["memory"] = memory_timings(case if case is not None else DEFAULT_CASE, size=size)
+        record["meets_target"]["memory"] = record["memory"]["meets_target"]
     if report:  # the paper's three cases x three detectors, from runs made (or kept) beforehand
         from .report.bench import report_timings
 

@@ -12,7 +12,8 @@ import trimesh
 
 from orthosim.errors import MeshError
 from orthosim.fdi import Arch
-from orthosim.meshload import MeshRepairWarning, ToothAxes, load_mesh_folder, load_tooth_mesh
+from orthosim.meshload import (DEFAULT_MAX_TRIANGLES, MeshRepairWarning, MeshSimplifiedWarning, ToothAxes,
+                               load_mesh_folder, load_tooth_mesh)
 from orthosim.openfulljaw import load_open_full_jaw
 from orthosim.pose import is_rigid
 from orthosim.shareddata import open_full_jaw_dir
@@ -332,3 +333,139 @@ def test_nan_vertex_in_an_stl_drops_its_face_and_refills_it(tmp_path):
     with pytest.warns(MeshRepairWarning, match="nan.stl.*NaN.*filled"):
         loaded = load_tooth_mesh(path)
     assert np.isfinite(loaded.vertices).all() and loaded.is_watertight and loaded.volume > 0
+
+
+# ---------------------------------------------------------------- text that is not UTF-8
+
+
+def _latin1_named(text: str, keyword: str, name: str = "Zahn_\xe4\xf6\xfc_Patient_M\xfcller") -> bytes:
+    """`text` with a Latin-1 name after its first `keyword` (as a European exporter writes it): not UTF-8."""
+    data = text.replace(keyword, f"{keyword} {name}", 1).encode("latin-1")
+    with pytest.raises(UnicodeDecodeError):
+        data.decode("utf-8")
+    return data
+
+
+def test_ascii_stl_with_a_latin1_solid_name_loads_with_its_geometry(tmp_path):
+    tooth = _tooth_shape()
+    path = tmp_path / "zahn_11.stl"
+    path.write_bytes(_latin1_named(trimesh.exchange.stl.export_stl_ascii(tooth), "solid"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a clean tooth: nothing to repair, nothing to say
+        loaded = load_tooth_mesh(path)
+    assert len(loaded.faces) == len(tooth.faces)
+    np.testing.assert_allclose(loaded.bounds, tooth.bounds, atol=1e-5)
+    assert loaded.volume == pytest.approx(tooth.volume, rel=1e-5)
+
+
+def test_obj_with_a_latin1_comment_loads_with_its_geometry(tmp_path):
+    tooth = _tooth_shape()
+    path = tmp_path / "zahn_11.obj"
+    path.write_bytes(_latin1_named("# exported\n" + trimesh.exchange.obj.export_obj(tooth), "# exported"))
+    loaded = load_tooth_mesh(path)
+    assert len(loaded.faces) == len(tooth.faces) and loaded.volume == pytest.approx(tooth.volume, rel=1e-5)
+
+
+@pytest.mark.parametrize("encoding", ["ascii", "binary_little_endian"])
+def test_ply_with_a_latin1_header_comment_loads_with_its_geometry(tmp_path, encoding):
+    tooth = _tooth_shape()
+    data = trimesh.exchange.ply.export_ply(tooth, encoding=encoding.split("_")[0])
+    magic, form, rest = data.split(b"\n", 2)  # "ply", the format line, then the rest of the header
+    path = tmp_path / "zahn_11.ply"
+    path.write_bytes(magic + b"\n" + form + b"\n" + _latin1_named("comment\n", "comment") + rest)
+    loaded = load_tooth_mesh(path)
+    assert len(loaded.faces) == len(tooth.faces) and loaded.volume == pytest.approx(tooth.volume, rel=1e-5)
+
+
+def test_binary_stl_with_a_latin1_header_keeps_its_geometry(tmp_path):
+    tooth = _tooth_shape()
+    data = bytearray(trimesh.exchange.stl.export_stl(tooth))
+    data[:80] = "Zahn \xe4\xf6\xfc solid".encode("latin-1").ljust(80, b" ")  # a binary header may start with anything
+    path = tmp_path / "zahn_11.stl"
+    path.write_bytes(bytes(data))
+    loaded = load_tooth_mesh(path)
+    assert len(loaded.faces) == len(tooth.faces) and loaded.volume == pytest.approx(tooth.volume, rel=1e-6)
+
+
+# ---------------------------------------------------------------- meshes far above what the model needs
+
+
+def _molar(subdivisions: int) -> tuple[trimesh.Trimesh, trimesh.Trimesh]:
+    """(the smooth parametric upper first molar, the same tooth loop-subdivided `subdivisions` times: x4 triangles each).
+
+    Loop subdivision smooths as it refines, as a scanner's dense surface is; the subdivided mesh
+    is the reference surface the simplified one is measured against.
+    """
+    from orthosim.anatomy import dimensions
+    from orthosim.fdi import tooth_type
+    from orthosim.toothshape import build_tooth_shape
+
+    tooth = build_tooth_shape(dimensions(16), Arch.UPPER, tooth_type(16), "smooth").mesh
+    v, f = trimesh.remesh.subdivide_loop(tooth.vertices, tooth.faces, iterations=subdivisions)
+    return tooth, trimesh.Trimesh(v, f, process=False)
+
+
+def _surface_distances_mm(a: trimesh.Trimesh, b: trimesh.Trimesh, n: int = 2000) -> np.ndarray:
+    """Distances (mm) from points spread over each surface to the other surface, both ways."""
+    pa, _ = trimesh.sample.sample_surface(a, n, seed=1)
+    pb, _ = trimesh.sample.sample_surface(b, n, seed=2)
+    return np.concatenate([trimesh.proximity.closest_point(b, pa)[1], trimesh.proximity.closest_point(a, pb)[1]])
+
+
+def _load_counting_messages(path, **kw):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        mesh = load_tooth_mesh(path, **kw)
+    return mesh, [w for w in caught if issubclass(w.category, MeshSimplifiedWarning)]
+
+
+def test_a_mesh_above_the_budget_is_simplified_to_it_with_one_message_and_keeps_its_shape(tmp_path):
+    _, dense = _molar(2)
+    assert len(dense.faces) > 100_000 and dense.is_watertight
+    path = tmp_path / "tooth_16.stl"
+    dense.export(path)
+    simplified, messages = _load_counting_messages(path, max_triangles=20_000)
+    assert len(simplified.faces) <= 20_000
+    assert simplified.metadata["triangles_in_file"] == len(dense.faces)
+    assert 0 < simplified.metadata["simplify_tolerance_mm"] <= 0.02
+    assert len(messages) == 1  # one line: the file, the count, the budget and how to change it
+    text = str(messages[0].message)
+    assert "\n" not in text
+    assert "tooth_16.stl" in text and f"{len(dense.faces):,} triangles" in text and "20,000" in text
+    assert "max_triangles_per_tooth" in text
+    # the shape is kept: closed, same volume, surfaces within hundredths of a mm of a 25 mm tooth
+    assert simplified.is_watertight and simplified.volume == pytest.approx(dense.volume, rel=2e-3)
+    distances = _surface_distances_mm(simplified, dense)
+    assert distances.max() < 0.05 and distances.mean() < 0.005
+
+
+def test_a_mesh_within_the_budget_is_left_as_it_is(tmp_path):
+    _, dense = _molar(1)
+    path = tmp_path / "tooth_16.stl"
+    dense.export(path)
+    loaded, messages = _load_counting_messages(path, max_triangles=len(dense.faces))
+    assert messages == [] and len(loaded.faces) == len(dense.faces)
+    unlimited, messages = _load_counting_messages(path, max_triangles=None)
+    assert messages == [] and len(unlimited.faces) == len(dense.faces)
+
+
+@pytest.mark.slow
+def test_a_tooth_of_almost_two_million_triangles_comes_down_to_the_default_budget(tmp_path):
+    _, dense = _molar(4)
+    assert len(dense.faces) > 1_500_000
+    path = tmp_path / "tooth_16.stl"
+    dense.export(path)
+    del dense
+    simplified, messages = _load_counting_messages(path)
+    assert len(messages) == 1 and f"{DEFAULT_MAX_TRIANGLES:,}" in str(messages[0].message)
+    assert len(simplified.faces) <= DEFAULT_MAX_TRIANGLES and simplified.is_watertight
+    tooth, _ = _molar(0)
+    assert simplified.volume == pytest.approx(tooth.volume, rel=0.02)  # loop subdivision shrinks a little
+
+
+def test_a_budget_the_tooth_cannot_meet_within_the_tolerance_is_refused_with_the_fix(tmp_path):
+    _, dense = _molar(1)
+    path = tmp_path / "tooth_16.stl"
+    dense.export(path)
+    with pytest.raises(MeshError, match=r"tooth_16.stl.*cannot be simplified to 300 triangles.*max_triangles_per_tooth"):
+        _load_counting_messages(path, max_triangles=300)

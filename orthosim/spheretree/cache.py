@@ -208,7 +208,8 @@ def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int = 
 
     def built():
         """(entry, tree) as each build finishes."""
-        if workers <= 1:
+        # a daemonic process (the simulation child of a drawn run, orthosim.background) may not start any
+        if workers <= 1 or multiprocessing.current_process().daemon:
             yield from ((e, _build(job)) for job, e in zip(jobs, waiting))
             return
         # fork: the children start at once with the parent's imports and compiled kernels
