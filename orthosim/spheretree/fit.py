@@ -11,8 +11,13 @@ medial axis holds both sides at once. So:
    radius of the largest inside ball touching x), so the two sides of a thin root fall together.
 2. Fit each leaf: candidate centres along the patch's inward normal, then a pattern search in 3D;
    the radius is always the distance to the farthest patch vertex, and the score is the number of
-   voxels of an outside-the-tooth band that fall in the sphere (its outside volume).
+   voxels of an outside-the-tooth band that fall in the sphere (its outside volume), plus the gap
+   between the sphere and its own patch, sum of vertex area x (radius - distance): on fine meshes
+   a good leaf's cap is thinner than a voxel, and the voxels alone cannot tell a thin cap from a
+   thick one that happens to miss their centres.
 3. Improve, a few rounds: leaves emptied earlier refill by splitting the worst leaves in two;
+   leaves move to where they pay (the dearest leaves split in two, paid for by merging neighbours
+   that cost little together, while a split gains more than a merge costs);
    each triangle moves to the leaf that holds it most deeply (only into a sphere that already
    holds it, so the sphere it leaves can shrink); the triangles that set a leaf's radius are
    handed to a neighbour that grows to take them when that lowers the outside volume; the
@@ -41,7 +46,7 @@ from .tree import SphereTree
 class FitOptions:
     """Knobs of the optimising builder (defaults tuned on the parametric and real teeth)."""
 
-    medial_pulls: tuple[float, ...] = (0.6, 0.8)  # pulls tried by fit_leaves (the best first fit wins)
+    medial_pulls: tuple[float, ...] = (0.7,)  # pulls tried by fit_leaves (the best first fit wins)
     medial_cap_mm: float = 4.0  # rho capped at this depth, mm
     medial_samples: int = 4000  # faces on which rho is estimated
     lloyd_iterations: int = 12
@@ -64,11 +69,8 @@ class FitOptions:
     relative_depth: bool = True  # reassignment compares depth / radius (True) or depth in mm
     refit_rounds: int = 8  # pattern-search rounds after each reassignment
     rebalance_share: float = 0.125  # per improve round: at most this share of the leaves merged and split
-    rebalance_kmeans: bool = False
-    rebalance_split_rounds: int = 3  # pattern-search rounds when pricing a split
     rebalance_merge_rounds: int = 3  # pattern-search rounds when pricing a merge
-    rebalance_merge_quantile: float = 0.5  # merges only between leaves this cheap (quantile of the cost)
-    gap_weight: float = 0.0  # score += this x sum over the patch of vertex area x (radius - distance), in voxels
+    gap_weight: float = 2.0  # score += this x sum over the patch of vertex area x (radius - distance), in voxels
     seed: int = 0
 
 
@@ -465,28 +467,15 @@ def _rebalance(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray, r
     pairs = adjacent_leaf_pairs(faces, leaf_of_face, n)
     if not len(cand) or not len(pairs):
         return leaf_of_face, c, r
-    # Merges are looked for among the cheap leaves only (where a bigger sphere costs little).
-    cheap = cost <= np.quantile(cost, options.rebalance_merge_quantile)
-    pairs = pairs[cheap[pairs[:, 0]] & cheap[pairs[:, 1]]]
-    if not len(pairs):
-        return leaf_of_face, c, r
     m = len(cand)
     in_cand = np.full(n, -1)
     in_cand[cand] = np.arange(m)
     trial = leaf_of_face.copy()
     centroid = vertices[faces].mean(axis=1)
-    if options.rebalance_kmeans:
-        face_order = np.argsort(leaf_of_face, kind="stable")
-        start = np.concatenate([[0], np.cumsum(counts)])
-        for j, w in enumerate(cand):
-            idx = face_order[start[w]:start[w + 1]]
-            half = _kmeans(centroid[idx], 2, 8, rng)
-            trial[idx[half == 1]] = n + j
-    else:
-        second = second_halves(centroid, leaf_of_face, in_cand >= 0)
-        trial[second] = n + in_cand[leaf_of_face[second]]
+    second = second_halves(centroid, leaf_of_face, in_cand >= 0)
+    trial[second] = n + in_cand[leaf_of_face[second]]
     changed = np.concatenate([cand, n + np.arange(m)])
-    cs, rs = fitter.fit(trial, n + m, changed, options.rebalance_split_rounds)
+    cs, rs = fitter.fit(trial, n + m, changed)
     split_cost = fitter.count(cs, rs)
     gain = cost[cand] - split_cost[:m] - split_cost[m:]
     groups = fitter.patches(node_vertex_groups(faces, leaf_of_face, n))
