@@ -69,7 +69,7 @@ class FitOptions:
     relative_depth: bool = True  # reassignment compares depth / radius (True) or depth in mm
     refit_rounds: int = 8  # pattern-search rounds after each reassignment
     rebalance_share: float = 0.125  # per improve round: at most this share of the leaves merged and split
-    rebalance_merge_rounds: int = 3  # pattern-search rounds when pricing a merge
+    rebalance_merge_rounds: int = 0  # pattern-search rounds when pricing a merge (more bought nothing)
     gap_weight: float = 2.0  # score += this x sum over the patch of vertex area x (radius - distance), in voxels
     seed: int = 0
 
