@@ -230,7 +230,8 @@ class _LeafFitter:
         return np.concatenate([self.vertices[groups], (self.vertex_area[groups] * real)[..., None]], axis=2)
 
     def score(self, pts: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For padded patch points (L, M, 3) and centres (L, c, 3), mm: outside voxels held, radii (L, c)."""
+        """For padded weighted patch points (L, M, 4) (`patches`) and centres (L, c, 3), mm: the score
+        (outside voxels held plus `gap_weight` x the gap to the patch in voxel volumes) and radii, (L, c)."""
         r, gap = _radius_and_gap(np.ascontiguousarray(pts, dtype=np.float64), np.ascontiguousarray(centres, dtype=np.float64))
         cnt = self.count(centres.reshape(-1, 3), r.ravel()).reshape(r.shape)
         # Ties (e.g. no outside voxel at all) go to the smaller sphere.
@@ -324,7 +325,7 @@ class _LeafFitter:
         return np.stack([np.bincount(leaf_of_face, weights=cross[:, i], minlength=n_leaves) for i in range(3)], axis=1)
 
     def fit_groups(self, pts: np.ndarray, normal: np.ndarray, search_rounds: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Fit spheres to padded patch points (w, M, 3) mm with normal sums (w, 3): centres (w, 3),
+        """Fit spheres to padded weighted patch points (w, M, 4) (`patches`) with normal sums (w, 3): centres (w, 3),
         radii (w,), mm, from candidates along each patch's inward normal, then a pattern search."""
         c0, r0 = enclosing_spheres(pts, iterations=60)
         n = normal / np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
@@ -450,10 +451,10 @@ def second_halves(points: np.ndarray, label: np.ndarray, split: np.ndarray) -> n
     return out
 
 
-def _rebalance(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray, max_moves: int, rng):
+def _rebalance(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray, max_moves: int):
     """Move leaves to where they pay: merge neighbours that cost little together, split the worst.
 
-    A split of leaf w in two (2-means of its face centroids, both halves fitted) gains
+    A split of leaf w in two (its face centroids halved across their long axis, both halves fitted) gains
     cost(w) - cost(halves); a merge of neighbours a, b costs cost(a + b) - cost(a) - cost(b). The
     best gains are paired with the cheapest merges, leaves disjoint, while a gain beats a cost:
     the number of leaves stays, the outside volume falls.
@@ -543,7 +544,7 @@ def fit_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: 
         if len(r) < n_leaves:
             leaf, c, r = _split_worst(fitter, leaf, c, r, n_leaves - len(r), rng)
         if options.rebalance_share > 0:
-            leaf, c, r = _rebalance(fitter, leaf, c, r, max(1, int(options.rebalance_share * len(r))), rng)
+            leaf, c, r = _rebalance(fitter, leaf, c, r, max(1, int(options.rebalance_share * len(r))))
         leaf = fitter.reassign(leaf, c, r)
         leaf, c, r = _compact(leaf, c, r)
         for _ in range(options.handoff_rounds):
