@@ -31,7 +31,7 @@ from ..lifeline import exit_with_parent
 from .build import build_sphere_tree, check_request, mesh_arrays
 from .tree import SphereTree
 
-BUILDER_VERSION = 8
+BUILDER_VERSION = 9
 
 
 def default_cache_dir() -> Path:

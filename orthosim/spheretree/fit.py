@@ -11,8 +11,13 @@ medial axis holds both sides at once. So:
    radius of the largest inside ball touching x), so the two sides of a thin root fall together.
 2. Fit each leaf: candidate centres along the patch's inward normal, then a pattern search in 3D;
    the radius is always the distance to the farthest patch vertex, and the score is the number of
-   voxels of an outside-the-tooth band that fall in the sphere (its outside volume).
+   voxels of an outside-the-tooth band that fall in the sphere (its outside volume), plus the gap
+   between the sphere and its own patch, sum of vertex area x (radius - distance): on fine meshes
+   a good leaf's cap is thinner than a voxel, and the voxels alone cannot tell a thin cap from a
+   thick one that happens to miss their centres.
 3. Improve, a few rounds: leaves emptied earlier refill by splitting the worst leaves in two;
+   leaves move to where they pay (the dearest leaves split in two, paid for by merging neighbours
+   that cost little together, while a split gains more than a merge costs);
    each triangle moves to the leaf that holds it most deeply (only into a sphere that already
    holds it, so the sphere it leaves can shrink); the triangles that set a leaf's radius are
    handed to a neighbour that grows to take them when that lowers the outside volume; the
@@ -41,7 +46,7 @@ from .tree import SphereTree
 class FitOptions:
     """Knobs of the optimising builder (defaults tuned on the parametric and real teeth)."""
 
-    medial_pulls: tuple[float, ...] = (0.6, 0.8)  # pulls tried by fit_leaves (the best first fit wins)
+    medial_pulls: tuple[float, ...] = (0.7,)  # pulls tried by fit_leaves (the best first fit wins)
     medial_cap_mm: float = 4.0  # rho capped at this depth, mm
     medial_samples: int = 4000  # faces on which rho is estimated
     lloyd_iterations: int = 12
@@ -63,6 +68,9 @@ class FitOptions:
     reassign_candidates: int = 24  # leaves (nearest centres) a face may move to
     relative_depth: bool = True  # reassignment compares depth / radius (True) or depth in mm
     refit_rounds: int = 8  # pattern-search rounds after each reassignment
+    rebalance_share: float = 0.125  # per improve round: at most this share of the leaves merged and split
+    rebalance_merge_rounds: int = 0  # pattern-search rounds when pricing a merge (more bought nothing)
+    gap_weight: float = 2.0  # score += this x sum over the patch of vertex area x (radius - distance), in voxels
     seed: int = 0
 
 
@@ -169,6 +177,30 @@ def _split_with_capacity(points: np.ndarray, k: int, capacity: int, rng, iterati
     return label
 
 
+@njit(cache=True, nogil=True)
+def _radius_and_gap(points, centers):
+    """(G, M, 4) weighted points (x, y, z mm, weight mm^2) and (G, C, 3) centres -> (G, C) radii to
+    the farthest point, and (G, C) sums of weight x (radius - distance), mm^3."""
+    g_n, m_n, c_n = points.shape[0], points.shape[1], centers.shape[1]
+    radius = np.empty((g_n, c_n))
+    gap = np.empty((g_n, c_n))
+    d = np.empty(m_n)
+    for g in range(g_n):
+        for c in range(c_n):
+            far = 0.0
+            for m in range(m_n):
+                dx, dy, dz = points[g, m, 0] - centers[g, c, 0], points[g, m, 1] - centers[g, c, 1], points[g, m, 2] - centers[g, c, 2]
+                d[m] = np.sqrt(dx * dx + dy * dy + dz * dz)
+                if d[m] > far:
+                    far = d[m]
+            total = 0.0
+            for m in range(m_n):
+                total += points[g, m, 3] * (far - d[m])
+            radius[g, c] = far
+            gap[g, c] = total
+    return radius, gap
+
+
 def voxel_spacing(vertices: np.ndarray, faces: np.ndarray, options: FitOptions) -> float:
     """Spacing of the scoring voxels for this mesh, mm: `voxel_per_edge` x its median edge length,
     kept within [min_voxel_mm, voxel_mm]."""
@@ -186,13 +218,24 @@ class _LeafFitter:
                                 band_mm=options.band_mm, fine_mm=options.fine_band_mm)
         self.voxel = self.band.voxel
         self.count = self.band.count  # outside volume of spheres, (n, 3) and (n,) mm, in fine voxels
+        tri = vertices[faces]
+        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        self.vertex_area = np.bincount(faces.ravel(), weights=np.repeat(area / 3, 3), minlength=len(vertices))
+
+    def patches(self, groups: np.ndarray) -> np.ndarray:
+        """Padded vertex groups (L, M) -> (L, M, 4): x, y, z mm and the vertex's share of the
+        surface, mm^2 (0 on padding, which repeats a row's first vertex)."""
+        real = np.ones(groups.shape, dtype=bool)
+        real[:, 1:] = groups[:, 1:] != groups[:, :1]
+        return np.concatenate([self.vertices[groups], (self.vertex_area[groups] * real)[..., None]], axis=2)
 
     def score(self, pts: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For padded patch points (L, M, 3) and centres (L, c, 3), mm: outside voxels held, radii (L, c)."""
-        r = radii_to_cover_each(pts, centres)
+        """For padded weighted patch points (L, M, 4) (`patches`) and centres (L, c, 3), mm: the score
+        (outside voxels held plus `gap_weight` x the gap to the patch in voxel volumes) and radii, (L, c)."""
+        r, gap = _radius_and_gap(np.ascontiguousarray(pts, dtype=np.float64), np.ascontiguousarray(centres, dtype=np.float64))
         cnt = self.count(centres.reshape(-1, 3), r.ravel()).reshape(r.shape)
         # Ties (e.g. no outside voxel at all) go to the smaller sphere.
-        return cnt + r / (100 * r.max()), r
+        return cnt + self.options.gap_weight * gap / self.voxel**3 + r / (100 * r.max()), r
 
     def handoff(self, leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray, k: int = 6) -> np.ndarray:
         """Hand the triangles that set a leaf's radius to a neighbour that may grow, where that pays.
@@ -275,22 +318,30 @@ class _LeafFitter:
             step[act[~improved]] *= 0.5
         return c
 
-    def fit(self, leaf_of_face: np.ndarray, n_leaves: int, which: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """First fit of leaves `which` (default all): centres (w, 3), radii (w,), mm, from candidates
-        along each patch's inward normal, then a pattern search."""
-        which = np.arange(n_leaves) if which is None else np.asarray(which)
-        pts = self.vertices[node_vertex_groups(self.faces, leaf_of_face, n_leaves)[which]]  # (w, M, 3)
-        c0, r0 = enclosing_spheres(pts, iterations=60)
+    def normal_sums(self, leaf_of_face: np.ndarray, n_leaves: int) -> np.ndarray:
+        """(n_leaves, 3) sums of the area-weighted outward normals of each leaf's faces (mm^2)."""
         tri = self.vertices[self.faces]
-        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # area-weighted normals
-        n = np.stack([np.bincount(leaf_of_face, weights=cross[:, i], minlength=n_leaves) for i in range(3)], axis=1)[which]
-        n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        return np.stack([np.bincount(leaf_of_face, weights=cross[:, i], minlength=n_leaves) for i in range(3)], axis=1)
+
+    def fit_groups(self, pts: np.ndarray, normal: np.ndarray, search_rounds: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Fit spheres to padded weighted patch points (w, M, 4) (`patches`) with normal sums (w, 3): centres (w, 3),
+        radii (w,), mm, from candidates along each patch's inward normal, then a pattern search."""
+        c0, r0 = enclosing_spheres(pts, iterations=60)
+        n = normal / np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
         t = np.asarray(self.options.depths)
         cand = c0[:, None, :] - (r0[:, None] * t[None, :])[:, :, None] * n[:, None, :]
         s, _ = self.score(pts, cand)
-        c = cand[np.arange(len(which)), s.argmin(axis=1)]
-        c = self.search(pts, c, 0.25 * r0)
+        c = cand[np.arange(len(pts)), s.argmin(axis=1)]
+        c = self.search(pts, c, 0.25 * r0, search_rounds)
         return c, radii_to_cover(pts, c)
+
+    def fit(self, leaf_of_face: np.ndarray, n_leaves: int, which: np.ndarray | None = None,
+            search_rounds: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """First fit of leaves `which` (default all): centres (w, 3), radii (w,), mm (`fit_groups`)."""
+        which = np.arange(n_leaves) if which is None else np.asarray(which)
+        pts = self.patches(node_vertex_groups(self.faces, leaf_of_face, n_leaves)[which])  # (w, M, 4)
+        return self.fit_groups(pts, self.normal_sums(leaf_of_face, n_leaves)[which], search_rounds)
 
     def reassign(self, leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray) -> np.ndarray:
         """Give each face to the leaf, among those already holding all its vertices, where it sits deepest.
@@ -345,7 +396,7 @@ def _compact(leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray):
 def _split_worst(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray, n_split: int, rng):
     """Split the n_split leaves holding the most outside volume in two (2-means on face centroids)."""
     n = len(r)
-    pts = fitter.vertices[node_vertex_groups(fitter.faces, leaf_of_face, n)]
+    pts = fitter.patches(node_vertex_groups(fitter.faces, leaf_of_face, n))
     score = fitter.score(pts, c[:, None, :])[0][:, 0]
     counts = np.bincount(leaf_of_face, minlength=n)
     score[counts < 2] = -np.inf
@@ -364,6 +415,112 @@ def _split_worst(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray,
     r = np.concatenate([r, np.zeros(len(worst))])
     c[changed], r[changed] = fitter.fit(leaf_of_face, n + len(worst), changed)
     return leaf_of_face, c, r
+
+
+def adjacent_leaf_pairs(faces: np.ndarray, leaf_of_face: np.ndarray, n: int) -> np.ndarray:
+    """(p, 2) distinct pairs a < b of leaves (of n) whose faces share a vertex."""
+    key = np.unique(faces.ravel().astype(np.int64) * n + np.repeat(leaf_of_face.astype(np.int64), 3))
+    vert, lf = key // n, key % n  # sorted by vertex, then leaf
+    found = [np.zeros((0, 2), np.int64)]
+    for step in range(1, len(key)):
+        same = vert[step:] == vert[:-step]
+        if not same.any():
+            break
+        found.append(np.stack([lf[:-step][same], lf[step:][same]], axis=1))
+    return np.unique(np.concatenate(found), axis=0)
+
+
+def second_halves(points: np.ndarray, label: np.ndarray, split: np.ndarray) -> np.ndarray:
+    """(F,) bool: the points (F, 3) of each group to split (`split`, (n,) bool over the labels)
+    that lie beyond the group's median along its principal axis; a group of k >= 2 points keeps
+    k // 2 of them, so both halves hold some."""
+    n = len(split)
+    sel = np.flatnonzero(split[label])
+    lab, x = label[sel], points[sel]
+    cnt = np.bincount(lab, minlength=n)
+    mean, _ = _group_means(x, lab, n)
+    d = x - mean[lab]
+    cov = np.stack([np.bincount(lab, weights=d[:, i] * d[:, j], minlength=n) for i in range(3) for j in range(3)], axis=1)
+    axis = np.linalg.eigh(cov.reshape(n, 3, 3))[1][:, :, 2]
+    proj = np.einsum("ij,ij->i", d, axis[lab])
+    order = np.lexsort((proj, lab))
+    rank = np.empty(len(sel), dtype=np.int64)
+    rank[order] = np.arange(len(sel)) - (np.cumsum(cnt) - cnt)[lab[order]]
+    out = np.zeros(len(label), dtype=bool)
+    out[sel[rank >= cnt[lab] // 2]] = True
+    return out
+
+
+def _rebalance(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray, max_moves: int):
+    """Move leaves to where they pay: merge neighbours that cost little together, split the worst.
+
+    A split of leaf w in two (its face centroids halved across their long axis, both halves fitted) gains
+    cost(w) - cost(halves); a merge of neighbours a, b costs cost(a + b) - cost(a) - cost(b). The
+    best gains are paired with the cheapest merges, leaves disjoint, while a gain beats a cost:
+    the number of leaves stays, the outside volume falls.
+    """
+    n = len(r)
+    faces, vertices, options = fitter.faces, fitter.vertices, fitter.options
+    counts = np.bincount(leaf_of_face, minlength=n)
+    cost = fitter.count(c, r).astype(np.float64)
+    order = np.argsort(-cost, kind="stable")
+    cand = order[counts[order] >= 2][: 2 * max_moves]
+    pairs = adjacent_leaf_pairs(faces, leaf_of_face, n)
+    if not len(cand) or not len(pairs):
+        return leaf_of_face, c, r
+    m = len(cand)
+    in_cand = np.full(n, -1)
+    in_cand[cand] = np.arange(m)
+    trial = leaf_of_face.copy()
+    centroid = vertices[faces].mean(axis=1)
+    second = second_halves(centroid, leaf_of_face, in_cand >= 0)
+    trial[second] = n + in_cand[leaf_of_face[second]]
+    changed = np.concatenate([cand, n + np.arange(m)])
+    cs, rs = fitter.fit(trial, n + m, changed)
+    split_cost = fitter.count(cs, rs)
+    gain = cost[cand] - split_cost[:m] - split_cost[m:]
+    groups = fitter.patches(node_vertex_groups(faces, leaf_of_face, n))
+    nsum = fitter.normal_sums(leaf_of_face, n)
+    merged_pts = np.concatenate([groups[pairs[:, 0]], groups[pairs[:, 1]]], axis=1)
+    cm, rm = fitter.fit_groups(merged_pts, nsum[pairs[:, 0]] + nsum[pairs[:, 1]], search_rounds=options.rebalance_merge_rounds)
+    merge_cost = fitter.count(cm, rm) - cost[pairs[:, 0]] - cost[pairs[:, 1]]
+    busy = np.zeros(n, dtype=bool)
+    splits, merges = [], []
+    mi = 0
+    merge_order = np.argsort(merge_cost, kind="stable")
+    for si in np.argsort(-gain, kind="stable"):
+        w = cand[si]
+        if len(splits) >= max_moves or not gain[si] > 0:
+            break
+        if busy[w]:
+            continue
+        while mi < len(merge_order):
+            a, b = pairs[merge_order[mi]]
+            if not (busy[a] or busy[b] or a == w or b == w):
+                break
+            mi += 1
+        if mi >= len(merge_order) or not gain[si] > merge_cost[merge_order[mi]]:
+            break
+        p = merge_order[mi]
+        mi += 1
+        a, b = pairs[p]
+        busy[[a, b, w]] = True
+        splits.append((si, b))
+        merges.append(p)
+    if not splits:
+        return leaf_of_face, c, r
+    out = leaf_of_face.copy()
+    c, r = c.copy(), r.copy()
+    for p in merges:
+        a, b = pairs[p]
+        out[leaf_of_face == b] = a
+        c[a], r[a] = cm[p], rm[p]
+    for si, b in splits:
+        w = cand[si]
+        out[trial == n + si] = b
+        c[w], r[w] = cs[si], rs[si]
+        c[b], r[b] = cs[m + si], rs[m + si]
+    return out, c, r
 
 
 def fit_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: FitOptions, rng):
@@ -386,13 +543,15 @@ def fit_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: 
     for _ in range(options.reassign_rounds):
         if len(r) < n_leaves:
             leaf, c, r = _split_worst(fitter, leaf, c, r, n_leaves - len(r), rng)
+        if options.rebalance_share > 0:
+            leaf, c, r = _rebalance(fitter, leaf, c, r, max(1, int(options.rebalance_share * len(r))))
         leaf = fitter.reassign(leaf, c, r)
         leaf, c, r = _compact(leaf, c, r)
         for _ in range(options.handoff_rounds):
             pts = vertices[node_vertex_groups(faces, leaf, len(r))]
             r = radii_to_cover(pts, c)
             leaf = fitter.handoff(leaf, c, r)
-        pts = vertices[node_vertex_groups(faces, leaf, len(r))]
+        pts = fitter.patches(node_vertex_groups(faces, leaf, len(r)))
         c = fitter.search(pts, c, 0.1 * radii_to_cover(pts, c), options.refit_rounds)
         r = radii_to_cover(pts, c)
     if len(r) < n_leaves:
