@@ -131,8 +131,11 @@ class Case:
         """(parameters, input files) that decide a mesh model: the dentition cache's key."""
         m = self.model
         if m.kind == "meshes":
-            return {"kind": m.kind, "files": m.files, "scale": m.scale}, [m.folder / f for f in m.files]
-        return {"kind": m.kind}, sorted(p for p in m.folder.iterdir() if p.is_file())
+            return ({"kind": m.kind, "files": m.files, "scale": m.scale, "frame": m.frame, "diastema_mm": m.diastema_mm},
+                    [m.folder / f for f in m.files])
+        folders = list(m.folders) or [m.folder]
+        return ({"kind": m.kind, "folders": len(folders), "diastema_mm": m.diastema_mm},
+                sorted(p for f in folders for p in f.iterdir() if p.is_file()))
 
     def _load_meshes(self):
         from . import meshload
