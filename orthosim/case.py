@@ -91,7 +91,9 @@ class Simulation:
     restitution: float = 0.5  # Newton's coefficient (0..1) of the reported impacts
     resistance_rule: str = "literature"  # centre of resistance: "literature" or "paper"
     resistance_fraction: float = 0.4  # literature rule: share (1/3..1/2) of the embedded root below the crest
-    occlusal_slide_mm: float = 0.05  # how much deeper teeth of the two arches in contact may sink while sliding
+    # how much deeper (mm) teeth of the two arches in contact may sink while sliding; None: the
+    # model's own (`orthosim.interpenetration.default_occlusal_slide_mm`)
+    occlusal_slide_mm: float | None = None
 
 
 @dataclass(frozen=True)
@@ -133,8 +135,11 @@ class Case:
         m = self.model
         budget = {} if m.max_triangles_per_tooth is None else {"max_triangles_per_tooth": m.max_triangles_per_tooth}
         if m.kind == "meshes":
-            return {"kind": m.kind, "files": m.files, "scale": m.scale, **budget}, [m.folder / f for f in m.files]
-        return {"kind": m.kind, **budget}, sorted(p for p in m.folder.iterdir() if p.is_file())
+            return ({"kind": m.kind, "files": m.files, "scale": m.scale, "frame": m.frame, "diastema_mm": m.diastema_mm,
+                     **budget}, [m.folder / f for f in m.files])
+        folders = list(m.folders) or [m.folder]
+        return ({"kind": m.kind, "folders": len(folders), "diastema_mm": m.diastema_mm, **budget},
+                sorted(p for f in folders for p in f.iterdir() if p.is_file()))
 
     def _load_meshes(self):
         from . import meshload
@@ -313,8 +318,8 @@ def _read_simulation(r: _Reader) -> Simulation:
     fraction = r.number("resistance_fraction", 0.4)
     if not (1.0 / 3.0 - 1e-9 <= fraction <= 0.5 + 1e-9):
         r.fail("resistance_fraction", f"{fraction:g} is outside 1/3 to 1/2", "use a value between 0.333 and 0.5")
-    slide = r.number("occlusal_slide_mm", 0.05)
-    if slide > 3.0:
+    slide = r.number("occlusal_slide_mm") if "occlusal_slide_mm" in r.table else None
+    if slide is not None and slide > 3.0:
         r.fail("occlusal_slide_mm", f"{slide:g} mm is more than a cusp's height", "use a value from 0 to 3 mm")
     return Simulation(share, restitution, rule, fraction, slide)
 

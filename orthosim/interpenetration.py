@@ -6,6 +6,10 @@ rest state, not a collision: the simulator measures it once at load, reports it,
 only stops a move that makes such a pair interpenetrate deeper (`orthosim.movement.simulation`).
 Which pairs intersect is decided exactly on the meshes (FCL); how deep is the largest depth of any
 vertex of one tooth inside the other (`collision.exact.penetration_depth`), in mm.
+
+The same measure sets how much the occlusal sliding rule lets teeth of the two arches sink while
+they slide along each other (`default_occlusal_slide_mm`): where a model's surfaces already
+overlap by that much at rest, a slide adding less is within what the model can tell apart.
 """
 
 from __future__ import annotations
@@ -14,6 +18,13 @@ import warnings
 from dataclasses import replace
 
 from .dentition import Dentition
+
+
+# The occlusal slide a model gets when its case sets none (mm): the touch tolerance at least (a
+# parametric model, whose teeth meet without overlapping), and at most the upper end of the mesh
+# noise of segmented scans at contacts (about 0.1-0.5 mm).
+SLIDE_MIN_MM = 0.05
+SLIDE_MAX_MM = 0.5
 
 
 class ScanInterpenetrationWarning(UserWarning):
@@ -55,3 +66,13 @@ def report_rest_interpenetration(dentition: Dentition, where) -> Dentition:
         warnings.warn(f"{where}: {len(ranked)} tooth pairs interpenetrate in the scan ({listed}); "
                       "taken as the rest state, not as collisions", ScanInterpenetrationWarning, stacklevel=3)
     return replace(dentition, info=info)
+
+
+def default_occlusal_slide_mm(dentition: Dentition) -> float:
+    """mm teeth of the two arches in contact may sink deeper than at rest while sliding, when the
+    case does not say: the deepest interpenetration the model has at rest (any pair, as measured at
+    load, `info["rest_interpenetration_mm"]`), within SLIDE_MIN_MM..SLIDE_MAX_MM. Patient 26 of
+    Open-Full-Jaw: 0.30 mm (26-37); parametric teeth: 0.05 mm."""
+    depths = dentition.info.get("rest_interpenetration_mm") or {}
+    deepest = max((float(d) for d in depths.values()), default=0.0)
+    return float(min(max(deepest, SLIDE_MIN_MM), SLIDE_MAX_MM))

@@ -25,7 +25,7 @@ from orthosim.dentition import Dentition
 from orthosim.fdi import Arch, arch_of
 from orthosim.tooth import CROWN, ROOT
 
-from .cej import split_at_cej
+from .cej import CejCut, cut_at_cej, vertex_blend
 from .cameras import VIEW_NAMES, CameraView, check_view, frame_view
 from .frame_state import FrameState
 from .gl import load_pyrender
@@ -59,34 +59,44 @@ def _drawn_parts(hide_roots: bool) -> list:
 def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: bool, smooth_cej: bool = True):
     """Vertices duplicated along the CEJ so crown and root faces get their own colour.
 
-    smooth_cej: triangles straddling the CEJ plane are cut along it (`render.cej`); off where a
-    picture colours the mesh face for face or crown vertex for vertex (exact contact faces,
-    `paint_crowns`), which need the model's own faces and vertices in their order.
+    smooth_cej: triangles straddling the CEJ plane are cut along it (`render.cej`), so the line is
+    smooth, not a staircase; `origin` says where each drawn face and vertex came from, so a
+    picture that colours the model's faces or crown vertices still can.
 
     Normals are the full mesh's smooth vertex normals, so the shading runs on across the seam and
     only the colour changes there. Returns positions (n, 3) float32 mm, normals (n, 3) float32,
-    colours (n, 4) float32, indices (m, 3) uint32.
+    colours (n, 4) float32, indices (m, 3) uint32, and origin: (model face of each drawn face (m,),
+    ends (n, 2) and t (n,) of each drawn vertex, as in `CejCut`, and how many drawn vertices,
+    first, are the crown's).
     """
-    if smooth_cej:  # a smooth CEJ line, not a staircase; new vertices, so no face-for-face correspondence
-        vertices, normals, all_faces, face_part = split_at_cej(mesh, face_part)
+    if smooth_cej:
+        cut = cut_at_cej(mesh, face_part)
     else:
-        vertices, normals, all_faces = mesh.vertices, mesh.vertex_normals, np.asarray(mesh.faces)
+        same = np.arange(len(mesh.vertices))
+        cut = CejCut(mesh.vertices, mesh.vertex_normals, np.asarray(mesh.faces), face_part,
+                     np.arange(len(mesh.faces)), np.stack([same, same], axis=1), np.zeros(len(same)))
     parts = _drawn_parts(hide_roots)
-    pos, nrm, col, idx = [], [], [], []
-    offset = 0
+    pos, nrm, col, idx, source_face, ends, t = [], [], [], [], [], [], []
+    offset = n_crown = 0
     for part in parts:
-        faces = all_faces[face_part == part]
+        chosen = cut.part == part
+        faces = cut.faces[chosen]
         if not len(faces):
             continue
         used, inverse = np.unique(faces.reshape(-1), return_inverse=True)
-        pos.append(vertices[used])
-        nrm.append(normals[used])
+        pos.append(cut.vertices[used])
+        nrm.append(cut.normals[used])
         colour = CROWN_COLOR if part == CROWN else ROOT_COLOR
         col.append(np.tile([*colour, 1.0], (len(used), 1)))
         idx.append(inverse.reshape(-1, 3) + offset)
+        source_face.append(cut.source_face[chosen])
+        ends.append(cut.ends[used])
+        t.append(cut.t[used])
         offset += len(used)
+        n_crown += len(used) if part == CROWN else 0
     return (np.concatenate(pos).astype(np.float32), np.concatenate(nrm).astype(np.float32),
-            np.concatenate(col).astype(np.float32), np.concatenate(idx).astype(np.uint32))
+            np.concatenate(col).astype(np.float32), np.concatenate(idx).astype(np.uint32),
+            (np.concatenate(source_face), np.concatenate(ends), np.concatenate(t), n_crown))
 
 
 class _ToothDrawable:
@@ -95,7 +105,8 @@ class _ToothDrawable:
     def __init__(self, pyrender, fdi: int, tooth, hide_roots: bool, keep_kdtree: bool, smooth_cej: bool = True):
         self.fdi = fdi
         self.arch = arch_of(fdi)
-        pos, nrm, col, idx = _split_by_part(tooth.mesh, tooth.face_part, hide_roots, smooth_cej)
+        pos, nrm, col, idx, origin = _split_by_part(tooth.mesh, tooth.face_part, hide_roots, smooth_cej)
+        self.face_of_row, ends, t, n_crown = origin
         self.base_colors = col  # (n_vertices, 4) float32
         self.material = pyrender.MetallicRoughnessMaterial(
             baseColorFactor=[1.0, 1.0, 1.0, 1.0], metallicFactor=0.0, roughnessFactor=ENAMEL_ROUGHNESS,
@@ -106,11 +117,11 @@ class _ToothDrawable:
         self.mesh = pyrender.Mesh([self.primitive], name=f"tooth {fdi}")
         self.node = pyrender.Node(name=f"tooth {fdi}", mesh=self.mesh, matrix=tooth.rest_pose)
         self.kdtree = cKDTree(pos.astype(np.float64)) if keep_kdtree else None  # local frame: built once
-        self.indices = idx  # (m, 3) drawn vertices of each drawn face
-        # drawn row of each mesh face (-1: not drawn); rows run over the parts in drawing order
-        order = np.concatenate([np.flatnonzero(tooth.face_part == part) for part in _drawn_parts(hide_roots)])
-        self.row_of_face = np.full(len(tooth.mesh.faces), -1, np.int64)
-        self.row_of_face[order] = np.arange(len(order))
+        self.indices = idx  # (m, 3) drawn vertices of each drawn face; face_of_row: its model face
+        # the crown's drawn vertices (the first block) as blends of the model's crown vertices, in
+        # the order of `Tooth.crown_vertices`, for pictures coloured per crown vertex
+        self.crown_blend = vertex_blend(np.unique(tooth.mesh.faces[tooth.face_part == CROWN]), ends[:n_crown],
+                                        t[:n_crown], pos[:n_crown], tooth.mesh.vertices)
         self.contact_surface = None  # built on first use by exact contact faces
         # bounding sphere in the local frame, to skip teeth far from every contact
         self.center_local = pos.mean(axis=0).astype(np.float64)
@@ -154,8 +165,7 @@ class DentitionScene:
 
         self.teeth: dict[int, _ToothDrawable] = {}
         for fdi in dentition.fdis:
-            d = _ToothDrawable(pyrender, fdi, dentition.teeth[fdi], hide_roots, self.color_contact_faces,
-                               smooth_cej and not self.color_contact_faces)
+            d = _ToothDrawable(pyrender, fdi, dentition.teeth[fdi], hide_roots, self.color_contact_faces, smooth_cej)
             self.teeth[fdi] = d
             self.scene.add_node(d.node)
 
@@ -321,8 +331,7 @@ class DentitionScene:
         candidates = faces_in_spheres(self._surface(fdi), self._pose(state, fdi), state.contact_centers, state.contact_radii)
         faces = faces_touching_any(self._surface(fdi), self._pose(state, fdi), candidates,
                                    [(self._surface(p), self._pose(state, p)) for p in partners])
-        rows = d.row_of_face[faces]
-        rows = rows[rows >= 0]
+        rows = np.flatnonzero(np.isin(d.face_of_row, faces))  # a cut face is drawn as up to three
         return np.unique(d.indices[rows]) if len(rows) else None
 
     def _surface(self, fdi: int):
@@ -368,16 +377,15 @@ def paint_crowns(scene: DentitionScene, colors: dict[int, np.ndarray]) -> None:
     row per vertex of `Tooth.crown_vertices`, in that order); other teeth get their base colours.
 
     For pictures that colour the surface by a per-vertex figure (the distance map, contact areas).
-    The crown part is the first block of a tooth's drawn vertices (see `_split_by_part`), in the
-    same sorted order as `Tooth.crown_vertices`."""
+    The crown part is the first block of a tooth's drawn vertices (see `_split_by_part`); where the
+    CEJ cut added vertices, their colours blend those of the model vertices they lie between."""
     for fdi, d in scene.teeth.items():
         c = colors.get(fdi)
         if c is None and not d.painted:
             continue
         out = d.base_colors.copy()
         if c is not None:
-            c = np.asarray(c, np.float32)
-            out[:len(c), :3] = c
+            out[:len(d.crown_blend.a), :3] = d.crown_blend.apply(np.asarray(c, np.float32))
         d.primitive.color_0 = out
         d.painted = c is not None
         scene.buffer_versions[d.primitive] = scene.buffer_versions.get(d.primitive, 0) + 1

@@ -98,3 +98,26 @@ def test_two_processes_filling_one_entry_at_once_both_get_whole_teeth(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the entry loads without a damage warning
         assert len(cached_dentition(PARAMS, lambda: pytest.fail("rebuilt"), cache_dir=tmp_path).teeth) == 2
+
+
+def test_a_cases_diastema_is_part_of_its_cached_model_not_served_from_the_same_teeth_without_it(tmp_path, monkeypatch):
+    from orthosim.case import load_case
+
+    monkeypatch.setenv("ORTHOSIM_CACHE", str(tmp_path / "cache"))
+    teeth = tmp_path / "teeth"
+    teeth.mkdir()
+    for fdi, x in ((11, -3.5), (21, 3.5)):
+        m = trimesh.creation.capsule(height=14.0, radius=3.0, count=[16, 16])
+        m.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+        m.apply_translation([x, -8.0, 20.0])
+        m.export(teeth / f"tooth_{fdi}.stl")
+    text = ('[model]\nkind = "meshes"\nfolder = "teeth"\n{extra}[model.files]\n"tooth_11.stl" = 11\n"tooth_21.stl" = 21\n'
+            '[treatment]\nduration_days = 10\nstep_days = 10\n')
+    gaps = {}
+    for name, extra in (("closed", ""), ("opened", "diastema_mm = 2.0\n")):
+        (tmp_path / f"{name}.toml").write_text(text.format(extra=extra))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            dent = load_case(tmp_path / f"{name}.toml").build_dentition()
+        gaps[name] = dent.teeth[21].rest_pose[0, 3] - dent.teeth[11].rest_pose[0, 3]
+    assert gaps["opened"] == pytest.approx(gaps["closed"] + 2.0)

@@ -17,8 +17,8 @@ from orthosim import fdi as F
 from orthosim.case import load_case
 from orthosim.collision import candidate_pairs, exact
 from orthosim.errors import CaseError
-from orthosim.meshload import load_mesh_folder
-from orthosim.openfulljaw import AxesEstimatedWarning, load_open_full_jaw
+from orthosim.meshload import ToothAxes, load_mesh_folder
+from orthosim.openfulljaw import AxesEstimatedWarning, estimated_axes, load_open_full_jaw
 from orthosim.pose import is_rigid
 from orthosim.shareddata import open_full_jaw_dir
 
@@ -83,8 +83,55 @@ def _angle(u, v) -> float:
     return float(np.degrees(np.arccos(np.clip(np.dot(u, v) / np.linalg.norm(u) / np.linalg.norm(v), -1, 1))))
 
 
-# Teeth whose own axis and their contralateral's mirrored axis agree within 10 degrees in this
-# patient (36 and 46 differ by 14, 37 and 47 by 32: no estimate can be within 15 of both there).
+def _contralateral(n: int) -> int:
+    return 10 * {1: 2, 2: 1, 3: 4, 4: 3}[F.quadrant(n)] + F.position(n)
+
+
+MIRROR = np.array([-1.0, 1.0, 1.0])  # across the arch frame's midline (x = 0)
+
+
+def _given_axes_in_arch_frame():
+    """FDI -> (ToothAxes, world mesh) of every tooth with a dataset axes entry, arch frame."""
+    dent, _ = full_jaw()
+    out = {}
+    for n, t in dent.teeth.items():
+        if n in dent.info["axes_estimated"]:
+            continue
+        R = t.rest_pose[:3, :3]
+        out[n] = (ToothAxes(long_axis=R @ [0.0, 1.0, 0.0], labial=R @ [0.0, 0.0, 1.0]), t.world_mesh())
+    return out
+
+
+@pytest.mark.real_data
+def test_every_tooth_hidden_in_turn_gets_an_estimated_long_axis_within_15_degrees_of_its_own_given_axis():
+    teeth = _given_axes_in_arch_frame()
+    assert len(teeth) == 29
+    errors = {}
+    for n, (axes, mesh) in teeth.items():
+        others = {m: a for m, (a, _) in teeth.items() if m != n}
+        estimate, _ = estimated_axes(n, mesh, others, {m: w for m, (_, w) in teeth.items() if m != n})
+        errors[n] = _angle(estimate.long_axis, axes.long_axis)
+    assert max(errors.values()) < 15.0, errors
+    assert np.median(list(errors.values())) < 7.0, errors
+
+
+@pytest.mark.real_data
+def test_an_estimated_long_axis_is_within_15_degrees_of_the_mirrored_contralateral_where_the_patient_is_symmetric():
+    # The issue's test, on every pair whose GIVEN axes agree within 10 degrees once mirrored. Where
+    # they do not, the patient is asymmetric and no estimate of the tooth's own axis can pass:
+    # 37 and 47 differ by 32 degrees, 17 and 27 by 23 (36/46 14, 34/44 15, 35/45 10).
+    teeth = _given_axes_in_arch_frame()
+    given = {n: a.long_axis for n, (a, _) in teeth.items()}
+    assert _angle(given[37], given[47] * MIRROR) > 30.0 and _angle(given[17], given[27] * MIRROR) > 20.0
+    symmetric = [n for n in teeth if _contralateral(n) in teeth and _angle(given[n], given[_contralateral(n)] * MIRROR) < 10.0]
+    assert len(symmetric) == 18
+    for n in symmetric:
+        others = {m: a for m, (a, _) in teeth.items() if m != n}
+        estimate, _ = estimated_axes(n, teeth[n][1], others, {m: w for m, (_, w) in teeth.items() if m != n})
+        assert _angle(estimate.long_axis, given[_contralateral(n)] * MIRROR) < 15.0, n
+
+
+# The whole path: an axes entry removed from a copy of the folder, the tooth loaded with a warning.
 @pytest.mark.real_data
 @pytest.mark.parametrize("hidden", [16, 46, 11, 33])
 def test_a_hidden_tooths_estimated_long_axis_is_within_15_degrees_of_its_own_and_its_mirrored_contralateral(tmp_path, hidden):

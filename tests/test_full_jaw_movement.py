@@ -19,9 +19,9 @@ from orthosim.movement.simulation import _exact_distance, penetrations
 CASE = Path(__file__).resolve().parent.parent / "cases" / "open_full_jaw_patient26.toml"
 
 
-@lru_cache(maxsize=4)
-def _run(loads: tuple, steps: int):
-    case = replace(load_case(CASE), loads=loads, step_days=10.0, duration_days=10.0 * steps)
+@lru_cache(maxsize=6)
+def _run(loads: tuple, steps: int, extractions: tuple = ()):
+    case = replace(load_case(CASE), loads=loads, step_days=10.0, duration_days=10.0 * steps, extractions=extractions)
     model = MovementModel.build(case, dentition=full_jaw()[0])
     return model, list(simulate(model, "continuous"))
 
@@ -60,6 +60,24 @@ def test_cusps_in_contact_at_rest_slide_along_each_other_instead_of_stopping_eve
     assert _moved(model, records, 16) > 0.1
     start = penetrations(model, records[0].poses)
     end = penetrations(model, records[-1].poses)
-    # never deeper than the rest state plus the sliding allowance (0.05 mm)
+    # never deeper than the rest state plus the sliding allowance
+    for pair in (16, 46), (16, 47), (16, 45):
+        assert end.get(pair, 0.0) <= start.get(pair, 0.0) + model.settings.occlusal_slide_mm + 1e-6, pair
+
+
+@pytest.mark.real_data
+def test_the_scans_own_bite_slides_by_its_deepest_rest_overlap_when_the_case_sets_no_allowance():
+    model, _ = _run((Load((12,), 1.0, "mesial", movement="translation"),), 1)
+    assert model.case.simulation.occlusal_slide_mm is None
+    assert model.settings.occlusal_slide_mm == pytest.approx(0.301, abs=0.002)  # 26-37 overlap in the scan
+
+
+@pytest.mark.real_data
+def test_an_upper_molar_extruded_into_the_lower_molar_it_bites_on_is_stopped():
+    load = (Load((16,), 150.0, "occlusal", movement="extrusion"),)
+    model, records = _run(load, 3)
+    _, free = _run(load, 3, (46, 47, 45))  # the same load with its antagonists gone
+    assert _moved(model, records, 16) < 0.5 * _moved(model, free, 16)
+    start, end = penetrations(model, records[0].poses), penetrations(model, records[-1].poses)
     for pair in (16, 46), (16, 47), (16, 45):
         assert end.get(pair, 0.0) <= start.get(pair, 0.0) + model.settings.occlusal_slide_mm + 1e-6, pair

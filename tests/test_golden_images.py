@@ -83,7 +83,7 @@ def test_distance_map_of_case1_before_treatment_matches_its_golden(orthosim_imag
     dent = case.build_dentition()
     poses = dent.rest_poses()
     maps = DistanceMapModel(dent).inter_arch(poses, absent=case.extractions)
-    scene = DentitionScene(dent, SIZE, hide_roots=True, show_markers=False, smooth_cej=False)
+    scene = DentitionScene(dent, SIZE, hide_roots=True, show_markers=False)  # as the report draws it: CEJ cut
     paint_crowns(scene, {n: distance_colors(m.distance_mm) for n, m in maps.items()})
     scene.update(FrameState(poses=poses, extracted=frozenset(case.extractions)))
     image = _renderer(SIZE).render(scene, "maxillary_occlusal")

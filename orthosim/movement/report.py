@@ -174,6 +174,7 @@ class RunReport:
             "settings": {"force_share": s.force_share, "restitution": s.restitution,
                          "resistance_rule": s.resistance_rule, "resistance_fraction": s.resistance_fraction,
                          "contact_tolerance_mm": s.contact_tolerance_mm, "touch_tolerance_mm": s.touch_tolerance_mm,
+                         "occlusal_slide_mm": s.occlusal_slide_mm,
                          "rate": {"threshold_cN": s.rate.threshold_cN, "saturation_cN": s.rate.saturation_cN,
                                   "max_rate_mm_per_day": s.rate.max_rate_mm_per_day,
                                   "reference_root_area_mm2": s.rate.reference_root_area_mm2}},

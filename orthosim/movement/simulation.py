@@ -18,7 +18,8 @@ Each step (the paper's frame) of `step_days`:
    the rest state) is tested only when the move takes the two into each other: for arch
    neighbours, when the exact meshes come closer or sink deeper; for facing teeth (the occlusal
    rule: cusps in contact may slide along each other), only when the exact meshes end the step
-   interpenetrating deeper than at rest (step 0) by more than `occlusal_slide_mm`.
+   interpenetrating deeper than at rest (step 0) by more than `occlusal_slide_mm` for a pair in
+   contact at step 0 (the bite as the model stands), `touch_tolerance_mm` for one the run made.
    Continuous: every mover is cut back to its
    earliest time of first contact (refined on the exact meshes to `contact_tolerance_mm`), so the
    teeth stop just touching; cutting one tooth may put it in another's way, so detection repeats
@@ -46,6 +47,7 @@ from ..collision import CollisionModel, CollisionRequest, candidate_pairs, detec
 from ..collision import exact
 from ..dentition import Dentition
 from ..errors import CaseError
+from ..interpenetration import default_occlusal_slide_mm
 from ..metrics import PairDistance, tooth_to_tooth_distances
 from .biomechanics import Motion, RateLaw, ToothMechanics, build_mechanics, tooth_motion
 from .impact import Body, impact
@@ -66,7 +68,8 @@ class MovementSettings:
     rounds: continuous detector: detection rounds on cut motions per step.
     occlusal_slide_mm: continuous detector: teeth of the two arches in contact at a step's start may
         slide along each other; the move stops only if it leaves them interpenetrating deeper than
-        at rest (step 0) by more than this (mm). Arch neighbours get `contact_tolerance_mm`.
+        at rest (step 0) by more than this (mm); by default the model's (see `from_case`). Arch
+        neighbours get `contact_tolerance_mm`.
     """
 
     force_share: float = 0.5
@@ -80,13 +83,18 @@ class MovementSettings:
     occlusal_slide_mm: float = 0.05
 
     @classmethod
-    def from_case(cls, case: Case) -> "MovementSettings":
+    def from_case(cls, case: Case, dentition: Dentition | None = None) -> "MovementSettings":
+        """The case's [simulation] settings; an occlusal_slide_mm the case leaves out is the model's
+        (`interpenetration.default_occlusal_slide_mm` of `dentition`, the touch tolerance without one)."""
         sim = getattr(case, "simulation", None)
+        slide = getattr(sim, "occlusal_slide_mm", None)
+        if slide is None:
+            slide = default_occlusal_slide_mm(dentition) if dentition is not None else cls.occlusal_slide_mm
         if sim is None:
-            return cls()
+            return cls(occlusal_slide_mm=slide)
         return cls(force_share=sim.force_share, restitution=sim.restitution,
                    resistance_rule=sim.resistance_rule, resistance_fraction=sim.resistance_fraction,
-                   occlusal_slide_mm=getattr(sim, "occlusal_slide_mm", cls.occlusal_slide_mm))
+                   occlusal_slide_mm=slide)
 
 
 @dataclass(frozen=True, eq=False)
@@ -152,8 +160,8 @@ class MovementModel:
     @classmethod
     def build(cls, case: Case, dentition: Dentition | None = None, collision: CollisionModel | None = None,
               settings: MovementSettings | None = None, tree_builder: Callable | None = None) -> "MovementModel":
-        settings = settings or MovementSettings.from_case(case)
         dentition = dentition or case.build_dentition()
+        settings = settings or MovementSettings.from_case(case, dentition)
         if collision is None:  # the project's cached sphere trees unless a builder is given
             collision = CollisionModel.from_dentition(dentition, tree_builder=tree_builder)
         extracted = frozenset(case.extractions)
@@ -473,6 +481,10 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
     depth_memo: dict = {}
     sink_memo: dict = {}  # (pair, pose bytes) -> mm: depths the sliding rule asks for
     initial_depths = penetrations(model, P, depth_memo)
+    # the bite as the model stands (a scan's): its contacts slide by occlusal_slide_mm; contacts the
+    # treatment makes (an incisor retracted onto its antagonist) by the touch tolerance
+    bite = frozenset(p for p in touching if p in model.facing)
+    slide_of = lambda pair: s.occlusal_slide_mm if pair in bite else min(s.occlusal_slide_mm, s.touch_tolerance_mm)  # noqa: E731
     yield StepRecord(0, 0.0, {n: T.copy() for n, T in P.items()}, frozenset(), tuple(touching), leaves[0], leaves[1],
                      (), None, 0.0, dist, max(initial_depths.values(), default=0.0), _deepest_first(initial_depths))
     for k in range(1, n_steps + 1):
@@ -513,7 +525,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
             if d1 > 0.0:
                 return not facing and d1 < d0 - 1e-6
             if facing:  # sliding cusps: bounded against the rest state, so steps cannot add up
-                return _depth(model, end, pair, sink_memo) - initial_depths.get(pair, 0.0) > s.occlusal_slide_mm
+                return _depth(model, end, pair, sink_memo) - initial_depths.get(pair, 0.0) > slide_of(pair)
             start = _depth(model, P, pair, sink_memo) if d0 <= 0.0 else 0.0
             deeper = _depth(model, end, pair, sink_memo) - start
             return deeper > (1e-6 if d0 > 0.0 else s.contact_tolerance_mm)
@@ -567,7 +579,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
             # tooth keeps its start pose, so the bound holds on the poses a step leaves.
             for pair in touching_set:
                 if pair in model.facing and any(P1[n] is not P[n] for n in pair) and \
-                        _depth(model, P1, pair, sink_memo) - initial_depths.get(pair, 0.0) > s.occlusal_slide_mm:
+                        _depth(model, P1, pair, sink_memo) - initial_depths.get(pair, 0.0) > slide_of(pair):
                     for n in pair:
                         P1[n] = P[n]
         else:

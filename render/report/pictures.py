@@ -85,8 +85,7 @@ class CasePictures:
         self.renderer = renderer
         self.data = data
         self.size = size
-        self.scene = DentitionScene(data.dentition, size, hide_roots=True, show_markers=False,
-                                    smooth_cej=False)  # paint_crowns colours crown vertices in the model's order
+        self.scene = DentitionScene(data.dentition, size, hide_roots=True, show_markers=False)
         self.font_px = font_px_for(size)
 
     def _draw(self, pose_name: str, view: str, colors: dict[int, np.ndarray], title: str, legend) -> np.ndarray:
