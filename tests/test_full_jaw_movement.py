@@ -13,8 +13,8 @@ import pytest
 
 from fulljaw_helpers import full_jaw
 from orthosim.case import Load, load_case
+from orthosim.collision import ExactQueries
 from orthosim.movement import MovementModel, simulate
-from orthosim.movement.simulation import _exact_distance, penetrations
 
 CASE = Path(__file__).resolve().parent.parent / "cases" / "open_full_jaw_patient26.toml"
 
@@ -47,7 +47,7 @@ def test_an_upper_incisor_retracted_sideways_into_the_lower_incisors_stops_just_
     assert 0.05 < moved < 0.6  # it moved, then the lower incisor's labial face stopped it
     last = records[-1]
     assert any(31 in e.pair and 21 in e.pair for r in records for e in r.collisions)
-    assert _exact_distance(model, last.poses, (21, 31)) < 0.05  # just touching, not sunk in
+    assert ExactQueries(model.collision).distance((21, 31), last.poses) < 0.05  # just touching, not sunk in
     assert last.max_penetration_mm < 0.06
     assert not records[-1].moving or 21 not in records[-1].moving  # it no longer moves at the end
 
@@ -58,8 +58,8 @@ def test_cusps_in_contact_at_rest_slide_along_each_other_instead_of_stopping_eve
     load = Load((16,), 150.0, "mesial", movement="translation")
     model, records = _run((load,), 2)
     assert _moved(model, records, 16) > 0.1
-    start = penetrations(model, records[0].poses)
-    end = penetrations(model, records[-1].poses)
+    start = ExactQueries(model.collision).penetrations(model.pairs, records[0].poses)
+    end = ExactQueries(model.collision).penetrations(model.pairs, records[-1].poses)
     # never deeper than the rest state plus the sliding allowance (0.05 mm)
     for pair in (16, 46), (16, 47), (16, 45):
         assert end.get(pair, 0.0) <= start.get(pair, 0.0) + model.settings.occlusal_slide_mm + 1e-6, pair

@@ -42,17 +42,14 @@ import numpy as np
 
 from .. import fdi as F
 from ..case import Case, Load
-from ..collision import CollisionModel, CollisionRequest, candidate_pairs, detect_step, interpolate_pose
-from ..collision import exact
+from ..collision import CollisionModel, CollisionRequest, ExactQueries, candidate_pairs, contacts, detect_step, interpolate_pose
 from ..dentition import Dentition
+from ..detectors import DETECTORS
 from ..errors import CaseError
 from ..metrics import PairDistance, tooth_to_tooth_distances
 from .biomechanics import Motion, RateLaw, ToothMechanics, build_mechanics, tooth_motion
 from .impact import Body, impact
 from .propagation import ForceBalance, propagate
-
-SIM_DETECTORS = ("circles", "discrete", "continuous", "exact")
-
 
 @dataclass(frozen=True)
 class MovementSettings:
@@ -346,85 +343,6 @@ def _at_fault(model, pair, motions, dt, centers) -> tuple[int, ...]:
     return out or pair
 
 
-def _depth(model: MovementModel, P, pair, known: dict) -> float:
-    """mm the pair's exact meshes interpenetrate at poses P (0 when apart), through the run's memo."""
-    a, b = pair
-    key = (pair, np.asarray(P[a]).tobytes(), np.asarray(P[b]).tobytes())
-    if key not in known:
-        if len(known) > 4096:
-            known.clear()
-        hit, _ = exact.collide(*_fcl_pair(model, P, pair))
-        ta, tb = model.dentition.teeth[a], model.dentition.teeth[b]
-        known[key] = exact.penetration_depth(ta.mesh, P[a], tb.mesh, P[b]) if hit else 0.0
-    return known[key]
-
-
-def _touching(model: MovementModel, detector: str, P: dict[int, np.ndarray], distances: exact.DistanceMemo | None = None):
-    """Pairs in contact at poses P with the detector's notion of contact, and the leaves to draw.
-
-    distances: the run's memo of exact distances: a pair neither of whose teeth has moved keeps its
-    exact distance without a new FCL query.
-    """
-    s = model.settings
-    pairs = list(model.pairs)
-    empty = (np.zeros((0, 3)), np.zeros(0))
-    if detector == "exact":
-        return [p for p in pairs if _exact_distance(model, P, p, distances) <= s.touch_tolerance_mm], empty
-    # circles: its contacts are the lenses of overlapping circles; the sphere-tree detectors: leaves
-    res = detect_step(model.collision, P, None, pairs, "circles" if detector == "circles" else "discrete",
-                      CollisionRequest(all_leaf_pairs=True))
-    touching = res.touching_pairs()
-    if detector == "continuous":
-        touching = [p for p in touching if _exact_distance(model, P, p, distances) <= s.touch_tolerance_mm]
-    keep = np.isin(res.pair_of_leaf, [i for i, p in enumerate(map(tuple, res.pairs.tolist())) if p in set(touching)])
-    if detector == "circles":  # one lens per pair, given for both teeth
-        return touching, (res.centers_a[keep], res.radii_a[keep])
-    centers = np.concatenate([res.centers_a[keep], res.centers_b[keep]])
-    radii = np.concatenate([res.radii_a[keep], res.radii_b[keep]])
-    return touching, (centers, radii)
-
-
-def _fcl_pair(model: MovementModel, P, pair):
-    ia, ib = model.collision.index[pair[0]], model.collision.index[pair[1]]
-    oa, ob = model.collision.fcl_object(ia), model.collision.fcl_object(ib)
-    exact.set_pose(oa, P[pair[0]])
-    exact.set_pose(ob, P[pair[1]])
-    return oa, ob
-
-
-def _exact_distance(model: MovementModel, P, pair, distances: exact.DistanceMemo | None = None) -> float:
-    """mm between the exact meshes of the pair at poses P; through the run's memo when given."""
-    if distances is None:
-        return exact.distance(*_fcl_pair(model, P, pair))
-    a, b = pair
-    return distances(model.collision.index[a], P[a], model.collision.index[b], P[b])
-
-
-def penetrations(model: MovementModel, P: Mapping[int, np.ndarray], known: dict | None = None) -> dict[tuple[int, int], float]:
-    """mm per intersecting candidate pair at poses P, on the exact meshes (FCL finds the
-    intersecting pairs, `exact.penetration_depth` measures how deep).
-
-    known: optional memo {(a, b): (pose a, pose b, depth)} of earlier steps, used and updated: a
-    pair neither of whose teeth has moved keeps its depth without a new measurement.
-    """
-    out = {}
-    for a, b in model.pairs:
-        if known is not None and (a, b) in known:
-            Ta, Tb, depth = known[(a, b)]
-            if np.array_equal(Ta, P[a]) and np.array_equal(Tb, P[b]):
-                if depth > 0:
-                    out[(a, b)] = depth
-                continue
-        hit, _ = exact.collide(*_fcl_pair(model, P, (a, b)))
-        depth = 0.0
-        if hit:
-            ta, tb = model.dentition.teeth[a], model.dentition.teeth[b]
-            depth = out[(a, b)] = exact.penetration_depth(ta.mesh, P[a], tb.mesh, P[b])
-        if known is not None:
-            known[(a, b)] = (P[a].copy(), P[b].copy(), depth)
-    return out
-
-
 def _deepening(depths: dict, initial: dict) -> float:
     """mm: the largest interpenetration the run has added to any pair (a model may start with some)."""
     return max((d - initial.get(p, 0.0) for p, d in depths.items()), default=0.0)
@@ -454,25 +372,26 @@ def _crown_centers_of(model, P, pair):
     return [model.dentition.teeth[n].to_world(model.dentition.teeth[n].crown_center, P[n]) for n in pair]
 
 
-def simulate(model: MovementModel, detector: str | None = None, steps: int | None = None) -> Iterator[StepRecord]:
+def simulate(model: MovementModel, detector: str | None = None, steps: int | None = None,
+             queries: ExactQueries | None = None) -> Iterator[StepRecord]:
     """Run the case of `model` with `detector` ('circles', 'discrete', 'continuous', 'exact'; the
     case's by default) for `steps` steps of the case's step_days (the case's count by default).
-    Yields the initial state (step 0), then one StepRecord per step."""
+    Yields the initial state (step 0), then one StepRecord per step. queries: the run's exact
+    queries on `model.collision` when the caller has prepared them (a fresh one otherwise)."""
     detector = detector or model.case.detector
-    if detector not in SIM_DETECTORS:
+    if detector not in DETECTORS:
         raise CaseError(model.case.path, "treatment.detector", f"unknown detector {detector!r}",
-                        f"use one of: {', '.join(SIM_DETECTORS)}")
+                        f"use one of: {', '.join(DETECTORS)}")
     s = model.settings
     dt = float(model.case.step_days)
     n_steps = model.case.steps if steps is None else int(steps)
     P = {n: np.asarray(T, float).copy() for n, T in model.dentition.rest_poses().items()}
-    # exact distances asked for in the run, each asked of FCL once (a step asks for many twice)
-    distances = exact.DistanceMemo(model.collision.fcl_object)
-    touching, leaves = _touching(model, detector, P, distances)
+    queries = queries or ExactQueries(model.collision)
+    touch_request = CollisionRequest(all_leaf_pairs=True, touch_tolerance_mm=s.touch_tolerance_mm)
+    found = contacts(model.collision, P, touch_request, queries, model.pairs, detector)
+    touching, leaves = list(found.touching), (found.centers, found.radii)
     dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
-    depth_memo: dict = {}
-    sink_memo: dict = {}  # (pair, pose bytes) -> mm: depths the sliding rule asks for
-    initial_depths = penetrations(model, P, depth_memo)
+    initial_depths = found.penetration
     yield StepRecord(0, 0.0, {n: T.copy() for n, T in P.items()}, frozenset(), tuple(touching), leaves[0], leaves[1],
                      (), None, 0.0, dist, max(initial_depths.values(), default=0.0), _deepest_first(initial_depths))
     for k in range(1, n_steps + 1):
@@ -486,8 +405,8 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                 if n in model.mechanics:
                     loads_on.setdefault(n, []).append((*load_vectors(model, P, load, n, centers), bodily))
         applied = {n: sum((f for f, *_ in v), np.zeros(3)) for n, v in loads_on.items()}
-        contacts = [(a, b, _normal(model, (a, b), centers)) for a, b in touching]
-        balance = propagate(applied, contacts, s.force_share,
+        normals = [(a, b, _normal(model, (a, b), centers)) for a, b in touching]
+        balance = propagate(applied, normals, s.force_share,
                             lambda n, f: n in model.mechanics and s.rate.moves(f, model.mechanics[n].root_area_mm2),
                             _onward(model, P, touching, centers))
         # 2. motions and intended end poses
@@ -508,14 +427,14 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
             if detector != "continuous":
                 return _approaching(model, pair, current, dt, centers)
             end = {n: (P1[n] if n in current else P[n]) for n in pair}
-            d0, d1 = _exact_distance(model, P, pair, distances), _exact_distance(model, end, pair, distances)
+            d0, d1 = queries.distance(pair, P), queries.distance(pair, end)
             facing = pair in model.facing
             if d1 > 0.0:
                 return not facing and d1 < d0 - 1e-6
             if facing:  # sliding cusps: bounded against the rest state, so steps cannot add up
-                return _depth(model, end, pair, sink_memo) - initial_depths.get(pair, 0.0) > s.occlusal_slide_mm
-            start = _depth(model, P, pair, sink_memo) if d0 <= 0.0 else 0.0
-            deeper = _depth(model, end, pair, sink_memo) - start
+                return queries.penetration(pair, end) - initial_depths.get(pair, 0.0) > s.occlusal_slide_mm
+            start = queries.penetration(pair, P) if d0 <= 0.0 else 0.0
+            deeper = queries.penetration(pair, end) - start
             return deeper > (1e-6 if d0 > 0.0 else s.contact_tolerance_mm)
 
         def tested(current: dict[int, Motion], skip: set) -> list[tuple[int, int]]:
@@ -540,7 +459,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                 tested_pairs.update(pairs)
                 if not pairs:
                     break
-                res = detect_step(model.collision, P, P1, pairs, "continuous", request, distances=distances)
+                res = detect_step(model.collision, P, P1, pairs, "continuous", request, queries=queries)
                 hits = [(tuple(map(int, pr)), float(t)) for pr, t in zip(res.pairs, res.time_of_first_contact) if not np.isnan(t)]
                 if not hits:
                     break
@@ -567,7 +486,7 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
             # tooth keeps its start pose, so the bound holds on the poses a step leaves.
             for pair in touching_set:
                 if pair in model.facing and any(P1[n] is not P[n] for n in pair) and \
-                        _depth(model, P1, pair, sink_memo) - initial_depths.get(pair, 0.0) > s.occlusal_slide_mm:
+                        queries.penetration(pair, P1) - initial_depths.get(pair, 0.0) > s.occlusal_slide_mm:
                     for n in pair:
                         P1[n] = P[n]
         else:
@@ -582,7 +501,8 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
         P = P1
         # 4. contacts, interpenetration, distances
         before = touching_set
-        touching, leaves = _touching(model, detector, P, distances)
+        found = contacts(model.collision, P, touch_request, queries, model.pairs, detector)
+        touching, leaves = list(found.touching), (found.centers, found.radii)
         # a moving tooth that made a new contact without a reported hit (it stopped within the
         # touching tolerance) has collided too; teeth sliding over the other arch's have not
         seen = {e.pair for e in events}
@@ -591,8 +511,8 @@ def simulate(model: MovementModel, detector: str | None = None, steps: int | Non
                 events.append(CollisionEvent(pair, 1.0, _impact(model, pair, motions, P, dt, centers, s.restitution)))
         dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
         yield StepRecord(k, k * dt, {n: T.copy() for n, T in P.items()}, moved, tuple(touching), leaves[0], leaves[1],
-                         tuple(events), balance, max(0.0, _deepening(depths := penetrations(model, P, depth_memo), initial_depths)), dist,
-                         max(depths.values(), default=0.0), _deepest_first(depths))
+                         tuple(events), balance, max(0.0, _deepening(found.penetration, initial_depths)), dist,
+                         max(found.penetration.values(), default=0.0), _deepest_first(found.penetration))
 
 
 def simulate_case(case: Case, detector: str | None = None, steps: int | None = None,
