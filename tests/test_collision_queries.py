@@ -78,6 +78,7 @@ def test_contacts_report_interpenetration_and_the_drawn_leaves():
     assert len(found.centers) == len(found.radii) > 0
 
 
+@pytest.mark.slow  # builds the 28 teeth from nothing (tens of seconds)
 def test_building_parametric_teeth_imports_neither_the_detectors_nor_numba(tmp_path):
     code = ("import sys\n"
             "from orthosim.parametric import parametric_dentition\n"
