@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from . import fdi as F
+from .detectors import DETECTORS
 from .errors import CaseError
 
 CASES_DIR = Path(__file__).resolve().parent.parent / "cases"
@@ -28,7 +29,6 @@ POINTS = ("bracket", "crown_center", "center_of_resistance")
 MOMENT_AXES = ("mesiodistal", "labiolingual", "long_axis")
 MOVEMENTS = ("auto", "translation", "tipping", "rotation", "extrusion", "intrusion")
 WIRES = ("rectangular", "round")
-DETECTORS = ("circles", "discrete", "continuous", "exact")
 MODEL_KINDS = ("parametric", "meshes", "open-full-jaw")
 # What each wire can do (the paper's wire models): a round wire only rotates the tooth, about the
 # point at 1/3 of root length; a rectangular wire translates under a force and rotates under a torque.

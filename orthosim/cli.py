@@ -15,6 +15,7 @@ from pathlib import Path
 import click
 
 from . import __version__
+from .detectors import DETECTORS
 from .errors import OrthosimError
 from .run import MIN_ANIMATION_S, RunOptions
 
@@ -132,7 +133,7 @@ def render_options(f):
 @click.argument("case", type=click.Path(path_type=Path))
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), default=None,
               help="Output folder (default: out/<case name>).")
-@click.option("--detector", type=click.Choice(["circles", "discrete", "continuous", "exact"]), default=None,
+@click.option("--detector", type=click.Choice(DETECTORS), default=None,
               help="Collision detector (default: the case's).")
 @render_options
 def run(case: Path, out_dir: Path | None, detector: str | None, **render_opts) -> None:
@@ -324,7 +325,7 @@ def imgdiff(golden: Path, candidate: Path, diff_path: Path | None, max_level: in
 @main.command()
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path), metavar="CASE...|RUN_DIR...")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Report folder.")
-@click.option("--detector", "detectors", multiple=True, type=click.Choice(["circles", "discrete", "continuous", "exact"]),
+@click.option("--detector", "detectors", multiple=True, type=click.Choice(DETECTORS),
               help="Detector to run each case with (repeatable; default: circles, discrete and continuous).")
 @click.option("--from-runs", is_flag=True, help="The arguments are run folders `orthosim run` wrote: report them, run nothing.")
 @click.option("--pdf", is_flag=True, help="Also print DIR/report.pdf with headless Chromium.")

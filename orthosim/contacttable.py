@@ -15,7 +15,7 @@ from typing import Iterable, Mapping, Sequence
 import fcl
 import numpy as np
 
-from .collision.exact import fcl_object, set_pose
+from .geometry.meshquery import fcl_object, set_pose
 from .dentition import Dentition
 from .fdi import arch_of
 from .tooth import CROWN

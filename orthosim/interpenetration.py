@@ -5,7 +5,7 @@ millimetre where the segmentation met (a "segmentation touch"). That overlap is 
 rest state, not a collision: the simulator measures it once at load, reports it, and from then on
 only stops a move that makes such a pair interpenetrate deeper (`orthosim.movement.simulation`).
 Which pairs intersect is decided exactly on the meshes (FCL); how deep is the largest depth of any
-vertex of one tooth inside the other (`collision.exact.penetration_depth`), in mm.
+vertex of one tooth inside the other (`geometry.meshquery.penetration_depth`), in mm.
 
 The same measure sets how much the occlusal sliding rule lets teeth of the two arches sink while
 they slide along each other (`default_occlusal_slide_mm`): where a model's surfaces already
@@ -38,19 +38,20 @@ def rest_interpenetration(dentition: Dentition, pairs=None) -> dict[tuple[int, i
     teeth of the other arch). A pair FCL finds intersecting keeps its entry even when no vertex
     lies inside the other mesh (edge-edge crossings): its depth is then 0.0 mm.
     """
-    from .collision import candidate_pairs, exact
+    from .collision import candidate_pairs
+    from .geometry import meshquery
 
     if pairs is None:
         pairs = candidate_pairs(dentition.fdis)
     objects = {}
     for n in {t for pair in pairs for t in pair}:
-        objects[n] = exact.fcl_object(dentition.teeth[n].mesh)
-        exact.set_pose(objects[n], dentition.teeth[n].rest_pose)
+        objects[n] = meshquery.fcl_object(dentition.teeth[n].mesh)
+        meshquery.set_pose(objects[n], dentition.teeth[n].rest_pose)
     out = {}
     for a, b in pairs:
-        if exact.collide(objects[a], objects[b])[0]:
+        if meshquery.collide(objects[a], objects[b])[0]:
             ta, tb = dentition.teeth[a], dentition.teeth[b]
-            out[(a, b)] = exact.penetration_depth(ta.mesh, ta.rest_pose, tb.mesh, tb.rest_pose)
+            out[(a, b)] = meshquery.penetration_depth(ta.mesh, ta.rest_pose, tb.mesh, tb.rest_pose)
     return out
 
 

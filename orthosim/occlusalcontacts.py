@@ -48,7 +48,8 @@ class OcclusalContact:
 def occlusal_contacts(dent: Dentition, poses: dict[int, np.ndarray] | None = None, absent=frozenset(),
                       band_mm: float = CONTACT_BAND_MM) -> list[OcclusalContact]:
     """Every facing pair of present teeth with its contact (in contact or not), upper arch right to left."""
-    from .collision import exact, facing_pairs
+    from .collision import facing_pairs
+    from .geometry import meshquery
 
     poses = poses if poses is not None else dent.rest_poses()
     out = []
@@ -56,15 +57,15 @@ def occlusal_contacts(dent: Dentition, poses: dict[int, np.ndarray] | None = Non
     for u, lo in facing_pairs(dent.fdis, absent):
         for n in (u, lo):
             if n not in objects:
-                objects[n] = exact.fcl_object(dent.teeth[n].mesh)
-            exact.set_pose(objects[n], poses[n])
-        gap = exact.distance(objects[u], objects[lo])
+                objects[n] = meshquery.fcl_object(dent.teeth[n].mesh)
+            meshquery.set_pose(objects[n], poses[n])
+        gap = meshquery.distance(objects[u], objects[lo])
         empty = np.zeros((0, 3))
         if gap > band_mm:
             out.append(OcclusalContact((u, lo), gap, 0.0, 0.0, 0.0, empty, empty))
             continue
         tu, tl = dent.teeth[u], dent.teeth[lo]
-        depth = exact.penetration_depth(tu.mesh, poses[u], tl.mesh, poses[lo]) if gap <= 0.0 else 0.0
+        depth = meshquery.penetration_depth(tu.mesh, poses[u], tl.mesh, poses[lo]) if gap <= 0.0 else 0.0
         area_u, pts_u = _contact_faces(tu.mesh, poses[u], tl.mesh, poses[lo], band_mm)
         area_l, pts_l = _contact_faces(tl.mesh, poses[lo], tu.mesh, poses[u], band_mm)
         out.append(OcclusalContact((u, lo), gap, depth, area_u, area_l, pts_u, pts_l))

@@ -33,7 +33,7 @@ from .occlusion import molar_relation, overjet
 from .tooth import CROWN, Tooth, part_of_faces
 
 if TYPE_CHECKING:  # imported where the model is built: a cached model needs neither FCL nor numba
-    from .collision.exact import MeshQuery
+    from .geometry.meshquery import MeshQuery
 
 CONTACT_GAP_MAX = 0.05  # mm: the largest gap accepted between teeth that should touch
 
@@ -237,7 +237,7 @@ def build_parametric_dentition(resolution: int | str = "smooth", third_molars: b
     """
     from scipy.optimize import least_squares
 
-    from .collision.exact import MeshQuery
+    from .geometry.meshquery import MeshQuery
 
     positions = range(1, 9) if third_molars else range(1, 8)
     fdis = [10 * q + p for q in F.QUADRANTS for p in positions]

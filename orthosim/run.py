@@ -189,7 +189,7 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None) 
     """The simulation side of a run: PhaseDone("model"), PhaseDone("trees"), one StepRecord per step,
     then the RunResult. Picklable arguments: it runs in the child process when the run draws.
     The per-step detail (steps.jsonl, distances_per_step.csv) streams into out_dir as it comes."""
-    from .collision import CollisionModel
+    from .collision import CollisionModel, ExactQueries
     from .metrics import occlusion_summary
     from .movement.report import DISTANCES_PER_STEP_FILE, STEPS_FILE, RunReport
     from .movement.simulation import MovementModel, simulate
@@ -199,10 +199,8 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None) 
     dent = dentition if dentition is not None else case.build_dentition()
     t1 = time.perf_counter()
     collision = CollisionModel.from_dentition(dent)
-    extracted = set(case.extractions)
-    for n in dent.fdis:  # the exact meshes' BVHs, built now rather than inside the first step
-        if n not in extracted:
-            collision.fcl_object(collision.index[n])
+    queries = ExactQueries(collision)  # the exact meshes' BVHs, built now rather than inside the first step
+    queries.prepare(n for n in dent.fdis if n not in set(case.extractions))
     t2 = time.perf_counter()
     model = MovementModel.build(case, dent, collision=collision)
     t3 = time.perf_counter()
@@ -211,7 +209,7 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None) 
     yield PhaseDone("trees", t2 - t1, f"{len(collision.bodies)} sphere trees and exact-mesh BVHs")
     out_dir = Path(out_dir)
     report = RunReport(model, detector, steps_file=out_dir / STEPS_FILE, distances_file=out_dir / DISTANCES_PER_STEP_FILE)
-    yield from report.collect(simulate(model, detector))
+    yield from report.collect(simulate(model, detector, queries=queries))
     report.finish_streams(out_dir)
     metrics = report.metrics()
     metrics["model"] = model_summary(dent)

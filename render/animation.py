@@ -25,7 +25,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Iterable, Iterator, Sequence
+from typing import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -311,7 +311,7 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
                size: tuple[int, int] = (640, 480), gif: bool = False, alpha: bool = False, progress: bool = True,
                hide_roots: bool = False, color_contact_faces: bool = False, png: bool = True, mp4: bool = True,
                fps: int = VIDEO_FPS, split_views: bool = False, total: int | None = None,
-               exact_contact_faces: bool = False, caption=None) -> dict:
+               exact_contact_faces: bool = False, caption=None, on_frame: Callable | None = None) -> dict:
     """Render every state in `frames` into out_dir (frames/NNNNN.png, animation.mp4, animation.gif).
 
     `frames` is taken ahead on a thread (`prefetch`); `orthosim run` feeds it the records of a
@@ -323,6 +323,8 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
     (the same object: a step in which nothing moved) is drawn once and its image repeated.
     `caption` (a `render.overlay.FrameCaption`) draws the shared overlay onto every frame: case,
     detector, day N of M, the colour legend and, if it asks for them, FDI labels.
+    on_frame(state, scene): called once each frame is handed to the encoders (`orthosim bench`
+    times this very loop frame by frame through it).
 
     Returns {"frames": n, "fps": end-to-end frames per second (render, read back, encode, write),
     "render_fps": ..., "views": [...], "size": [w, h], "encode_s": time to flush the encoders, ...}.
@@ -364,6 +366,8 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
                         frame = tile(images)
                     previous = state
                 sink.add(frame, images if split_views else ())
+                if on_frame is not None:
+                    on_frame(state, scene)
                 n += 1
                 bar.update(n, n / max(time.perf_counter() - started, 1e-9))
                 interrupted()

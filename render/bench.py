@@ -8,18 +8,18 @@ machine does not move the figure; the end-to-end records also give frames / tota
     (`orthosim.collision.bench.collision_timings`), and the same as fps;
   - render: draw plus colour read-back of one 640x480 frame, the scene already updated, with
     `SyntheticMotion` (all 28 teeth, 2,000 markers: the issue's worst case);
-  - end_to_end: the pipeline `orthosim run` uses, frame to frame, one frame per simulation step:
-    the case simulated with the continuous detector in a child process
-    (`orthosim.background.in_child_process`, as `cli._run_case` does), its records sent through a
-    bounded queue and taken off it on a thread (`animation.prefetch`) while this process updates
-    the scene, renders, reads back, and encodes (MP4 always, PNG frames unless disabled) on the
-    background encoders of `animation.FrameSink`, whose bounded queues make the loop wait for
-    them; `end_to_end_simulation_on_thread` is the same with the simulation on that thread of
-    this process instead (the pipeline before the child process, sharing one GIL with the
-    drawing), `end_to_end_synthetic` the same with `SyntheticMotion` instead of the simulation,
-    and `end_to_end_interpolated` the same as end_to_end with `frames_per_step` frames per
-    simulation step (poses interpolated between steps, `render.timeline`), which is what
-    `orthosim run` writes by default;
+  - end_to_end: `animation.render_run` itself, the function `orthosim run` draws with, timed frame
+    to frame through its `on_frame` callback, one frame per simulation step: the case simulated
+    with the continuous detector in a child process (`orthosim.background.in_child_process`, as
+    `orthosim run` does), its records taken off a bounded queue on a thread while render_run
+    updates the scene, renders, reads back, and encodes (MP4 always, PNG frames unless disabled)
+    on its background encoders; the variants compared are render_run's own parameters:
+    `end_to_end_overlay` with its `caption` (the frame overlay, without and with FDI labels),
+    `end_to_end_simulation_on_thread` with the simulation on that thread of this process instead
+    of a child process (sharing one GIL with the drawing), `end_to_end_synthetic` with
+    `SyntheticMotion` instead of the simulation, and `end_to_end_interpolated` with
+    `frames_per_step` frames per simulation step (poses interpolated between steps,
+    `render.timeline`), which is what `orthosim run` writes by default;
   - render_variants: the same render with each optimisation undone in turn, measured
     round-robin in the same run so that the ratios stand even when the absolute figures wander
     with the machine's load;
@@ -175,28 +175,18 @@ def _render_variants(dentition, states, size, frames_per_round: int, rounds: int
 
 
 
-def _simulation(case_obj, dentition, detector: str):
-    """(MovementModel, simulate, simulate_case) when the movement code is present, else (None, reason)."""
-    try:
-        from orthosim.movement.simulation import MovementModel, simulate, simulate_case
-    except ImportError as exc:
-        return None, f"orthosim.movement is not available ({exc})"
-    return (MovementModel.build(case_obj, dentition=dentition), simulate, simulate_case), None
-
-
 def _overlay_figures(end_to_end, in_child_process, simulate_case, case_obj, detector, n_states, dentition,
-                     extracted, e2e_off, size) -> dict:
+                     extracted, e2e_off) -> dict:
     """end_to_end again with the frame overlay drawn (caption, day counter, legend; then with FDI
     labels too), in the same run as `e2e_off`, and the ratio of each to it."""
-    from .overlay import FrameCaption, FrameOverlay
+    from .overlay import FrameCaption
 
     out = {"without_overlay_fps": e2e_off["fps"]}
     for name, labels in (("overlay", False), ("overlay_with_labels", True)):
         caption = FrameCaption(case_obj.name, detector, case_obj.step_days, case_obj.duration_days, labels=labels)
-        overlay = FrameOverlay(caption, dentition, size)
         with in_child_process(simulate_case, case_obj, detector, n_states - 1, dentition=dentition,
                               ignore_warnings=True) as records:
-            rec = end_to_end((FrameState.from_step(r, extracted) for r in records), overlay=overlay)
+            rec = end_to_end((FrameState.from_step(r, extracted) for r in records), caption=caption)
         out[f"{name}_fps"] = rec["fps"]
         out[f"{name}_ratio"] = rec["fps"] / e2e_off["fps"] if e2e_off["fps"] else None
     out["target_ratio"] = 0.95
@@ -230,7 +220,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
 
     from orthosim.background import in_child_process
 
-    from .animation import FrameSink, prefetch
+    from .animation import render_run
     from .renderer import Renderer
     from .scene import DentitionScene
 
@@ -287,44 +277,41 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         if i >= warmup:
             render_times.append(time.perf_counter() - t0)
 
-    def end_to_end(state_iter, warm: int = warmup, overlay=None) -> dict:
-        """Frame-to-frame wall time of the pipeline `render_run` uses: states taken ahead on a
-        thread (`prefetch`; from a child process when `state_iter` reads one), scene update,
-        render, read back, encode on the sink's threads."""
-        times, markers, drawn, moving = [], [], [], []
+    def end_to_end(state_iter, warm: int = warmup, caption=None) -> dict:
+        """Frame-to-frame wall time of `render_run` itself, the function `orthosim run` draws with:
+        states taken ahead on a thread (from a child process when `state_iter` reads one), scene
+        update, render, read back, the overlay when `caption` is given (a `render.overlay.FrameCaption`),
+        encode on the sink's threads. Timed through its `on_frame` callback."""
+        stamps, markers, drawn, moving = [], [], [], []
+
+        def on_frame(st, sc):
+            stamps.append(time.perf_counter())
+            markers.append(st.n_contacts)
+            drawn.append(len(sc.markers.positions) if st.n_contacts else 0)
+            moving.append(len(st.moving))
+
         tmp_ctx = tempfile.TemporaryDirectory(prefix="orthosim-bench-") if work_dir is None else None
         out_dir = Path(work_dir) if work_dir is not None else Path(tmp_ctx.name)
-        sink = FrameSink(out_dir, png=png, mp4=True)
-        t_loop = t_prev = time.perf_counter()
-        for i, st in enumerate(prefetch(state_iter)):
-            scene.update(st)
-            image = renderer.render(scene, "frontal")
-            if overlay is not None:  # as render_run draws it (render.overlay)
-                overlay.label(image, scene.view("frontal"), st)
-                image = overlay.caption_frame(image, st)
-            sink.add(image)
-            now = time.perf_counter()
-            if i >= warm:
-                times.append(now - t_prev)
-                markers.append(st.n_contacts)
-                drawn.append(len(scene.markers.positions) if st.n_contacts else 0)
-                moving.append(len(st.moving))
-            t_prev = now
-            if i == warm - 1:
-                t_loop = now
-        sink.close()
-        overall = frames / (time.perf_counter() - t_loop)  # includes draining the encoders
+        render_run(dentition, state_iter, out_dir, views=("frontal",), size=size, png=png, mp4=True, progress=False,
+                   caption=caption, on_frame=on_frame)
+        done = time.perf_counter()
+        first = max(warm, 1)  # a frame's time runs from the frame before it
+        times = np.diff(stamps)[first - 1:].tolist()
+        measured = slice(warm, None)
+        # frames after the warm-up over the time from the warm-up's last frame to the encoders drained
+        overall = (len(stamps) - first) / (done - stamps[first - 1]) if len(stamps) > first else float("nan")
         mp4 = out_dir / "animation.mp4"
         mp4_bytes = mp4.stat().st_size if mp4.exists() else 0
         if tmp_ctx is not None:
             tmp_ctx.cleanup()
         return {"fps": _median_fps(times), "fps_overall_including_encoder_drain": overall, "mp4_bytes": mp4_bytes,
-                "markers_per_frame": {"median": float(np.median(markers)), "max": int(max(markers))},
+                "markers_per_frame": {"median": float(np.median(markers[measured])), "max": int(max(markers[measured]))},
                 # a sphere the state lists several times is drawn once (DentitionScene.unique_markers)
-                "distinct_markers_drawn_per_frame": {"median": float(np.median(drawn)), "max": int(max(drawn))},
+                "distinct_markers_drawn_per_frame": {"median": float(np.median(drawn[measured])),
+                                                     "max": int(max(drawn[measured]))},
                 # share of the measured frames in which some tooth moved: a case that has come to
                 # rest draws (cheaply) the same teeth again, so read the fps with this beside it
-                "frames_with_moving_teeth": float(np.mean([m > 0 for m in moving]))}
+                "frames_with_moving_teeth": float(np.mean([m > 0 for m in moving[measured]]))}
 
     encode = ["MP4 encode (libx264 ultrafast)"] + (["PNG frames (render.png)"] if png else [])
     e2e_synthetic = end_to_end(synthetic(i) for i in range(n_states))
@@ -339,59 +326,55 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     e2e_overlay = None
     collision = None
     if case_obj is not None and simulate:
-        sim, why = _simulation(case_obj, dentition, detector)
-        if sim is None:
-            pending["simulation"] = why
-        else:
-            movement_model, run, simulate_case = sim
-            gen = run(movement_model, detector, steps=n_states)
-            sim_times = []
-            for i in range(n_states):
-                t0 = time.perf_counter()
-                next(gen)
-                if i >= warmup:
-                    sim_times.append(time.perf_counter() - t0)
-            gen.close()
-            fps_sim = _median_fps(sim_times)
-            # the pipeline of `orthosim run`: the simulation in a child process (orthosim.background),
-            # running ahead of the drawing through a bounded queue, so that it does not take turns
-            # with the drawing and encoding for this process's GIL
-            sim_steps = f"simulation step (orthosim.movement, {detector} detector)"
-            with in_child_process(simulate_case, case_obj, detector, n_states - 1, dentition=dentition,
+        from orthosim.movement.simulation import MovementModel, simulate_case
+        from orthosim.movement.simulation import simulate as simulate_steps
+
+        movement_model = MovementModel.build(case_obj, dentition=dentition)
+        gen = simulate_steps(movement_model, detector, steps=n_states)
+        sim_times = []
+        for i in range(n_states):
+            t0 = time.perf_counter()
+            next(gen)
+            if i >= warmup:
+                sim_times.append(time.perf_counter() - t0)
+        gen.close()
+        fps_sim = _median_fps(sim_times)
+        # the pipeline of `orthosim run`: the simulation in a child process (orthosim.background),
+        # running ahead of the drawing through a bounded queue, so that it does not take turns
+        # with the drawing and encoding for this process's GIL
+        sim_steps = f"simulation step (orthosim.movement, {detector} detector)"
+        with in_child_process(simulate_case, case_obj, detector, n_states - 1, dentition=dentition,
+                              ignore_warnings=True) as records:
+            e2e_sim = end_to_end(FrameState.from_step(rec, extracted) for rec in records)
+        e2e_sim["includes"] = [f"{sim_steps} in a child process (orthosim.background), records sent "
+                               "through a bounded queue", "scene update", "draw", "colour read-back", *encode]
+        e2e_overlay = _overlay_figures(end_to_end, in_child_process, simulate_case, case_obj, detector, n_states,
+                                       dentition, extracted, e2e_sim)
+        # the same with the simulation on a thread of this process (`animation.prefetch` alone):
+        # what the child process buys, measured in this run
+        e2e_thread = end_to_end(FrameState.from_step(rec, extracted)
+                                for rec in simulate_steps(movement_model, detector, steps=n_states - 1))
+        e2e_thread["includes"] = [f"{sim_steps} on a thread of the drawing process (animation.prefetch)",
+                                  *e2e_sim["includes"][1:]]
+        if frames_per_step > 1:
+            # what `orthosim run` does by default: frames interpolated between steps
+            import itertools
+
+            from .timeline import frames_from_steps
+
+            # warm up over the same simulation steps as the other figures (a case's first steps,
+            # where collisions are resolved, are much slower than the rest)
+            warm = 1 + (warmup - 1) * frames_per_step
+            with in_child_process(simulate_case, case_obj, detector, n_states, dentition=dentition,
                                   ignore_warnings=True) as records:
-                e2e_sim = end_to_end(FrameState.from_step(rec, extracted) for rec in records)
-            e2e_sim["includes"] = [f"{sim_steps} in a child process (orthosim.background), records sent "
-                                   "through a bounded queue", "scene update", "draw", "colour read-back", *encode]
-            e2e_overlay = _overlay_figures(end_to_end, in_child_process, simulate_case, case_obj, detector, n_states,
-                                           dentition, extracted, e2e_sim, size)
-            # the same with the simulation on a thread of this process (`prefetch` alone, the
-            # pipeline before the child process): what the process buys, measured in this run
-            e2e_thread = end_to_end(FrameState.from_step(rec, extracted)
-                                    for rec in run(movement_model, detector, steps=n_states - 1))
-            e2e_thread["includes"] = [f"{sim_steps} on a thread of the drawing process (animation.prefetch)",
-                                      *e2e_sim["includes"][1:]]
-            if frames_per_step > 1:
-                # what `orthosim run` does by default: frames interpolated between steps
-                import itertools
+                steps = frames_from_steps(records, extracted, frames_per_step)
+                e2e_interp = end_to_end(itertools.islice(steps, warm + frames), warm=warm)
+            e2e_interp["frames_per_step"] = frames_per_step
+            e2e_interp["includes"] = [f"one simulation step per {frames_per_step} frames, poses interpolated "
+                                      "between steps (render.timeline, as `orthosim run`)", *e2e_sim["includes"]]
+        from orthosim.collision.bench import collision_timings
 
-                from .timeline import frames_from_steps
-
-                # warm up over the same simulation steps as the other figures (a case's first steps,
-                # where collisions are resolved, are much slower than the rest)
-                warm = 1 + (warmup - 1) * frames_per_step
-                with in_child_process(simulate_case, case_obj, detector, n_states, dentition=dentition,
-                                      ignore_warnings=True) as records:
-                    steps = frames_from_steps(records, extracted, frames_per_step)
-                    e2e_interp = end_to_end(itertools.islice(steps, warm + frames), warm=warm)
-                e2e_interp["frames_per_step"] = frames_per_step
-                e2e_interp["includes"] = [f"one simulation step per {frames_per_step} frames, poses interpolated "
-                                          "between steps (render.timeline, as `orthosim run`)", *e2e_sim["includes"]]
-            try:
-                from orthosim.collision.bench import collision_timings
-
-                collision = collision_timings(dentition, model=movement_model.collision, repeats=collision_repeats)
-            except ImportError as exc:
-                pending["collision"] = f"orthosim.collision.bench is not available ({exc})"
+        collision = collision_timings(dentition, model=movement_model.collision, repeats=collision_repeats)
     elif case_obj is None:
         pending["simulation"] = "no case given (a bare dentition): end_to_end uses SyntheticMotion"
     else:

@@ -16,7 +16,7 @@ import pytest
 
 from orthosim.background import ChildProcessIterator, fork_is_safe, in_child_process
 from orthosim.case import DEFAULT_CASE, load_case
-from orthosim.collision import exact
+from orthosim.geometry import meshquery
 from orthosim.errors import CaseError
 from orthosim.movement.simulation import MovementModel, simulate, simulate_case
 
@@ -163,23 +163,22 @@ def test_a_child_that_dies_is_reported_instead_of_waited_for():
 
 
 def test_remembered_exact_distances_are_fcls_own_answers():
-    from orthosim.collision import CollisionModel
+    from orthosim.collision import CollisionModel, ExactQueries
     from render.standin import standin_dentition
 
     dent = standin_dentition()
     model = CollisionModel.from_dentition(dent)
     rest = dent.rest_poses()
     a, b = dent.adjacent_pairs()[0]
-    ia, ib = model.index[a], model.index[b]
-    memo = exact.DistanceMemo(model.fcl_object)
+    queries = ExactQueries(model)
+    oa, ob = meshquery.fcl_object(dent.teeth[a].mesh), meshquery.fcl_object(dent.teeth[b].mesh)
     for dx in (0.0, -0.3, 0.5, 0.0, -0.3):  # repeats among them
         Ta = rest[a].copy()
         Ta[0, 3] += dx
-        oa, ob = model.fcl_object(ia), model.fcl_object(ib)
-        exact.set_pose(oa, Ta)
-        exact.set_pose(ob, rest[b])
-        assert memo(ia, Ta, ib, rest[b]) == exact.distance(oa, ob)
-    assert memo.queries == 3  # each distinct query asked of FCL once
+        meshquery.set_pose(oa, Ta)
+        meshquery.set_pose(ob, rest[b])
+        assert queries.distance((a, b), {a: Ta, b: rest[b]}) == meshquery.distance(oa, ob)
+    assert queries.queries == 3  # each distinct query asked of FCL once
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="reads /proc to find the run's child processes")

@@ -17,16 +17,8 @@ from orthosim.collision.discrete import overlapping_leaves  # noqa: E402
 
 def both(fn, *args):
     """fn(*args) with the numpy descent and with the compiled one."""
-    old = descent.USE_COMPILED
-    try:
-        descent.USE_COMPILED = False
-        ref = fn(*args)
-        descent.USE_COMPILED = True
-        assert descent.compiled_descent() is not None
-        got = fn(*args)
-    finally:
-        descent.USE_COMPILED = old
-    return ref, got
+    assert descent.compiled_descent() is not None and descent.compiled_descent(False) is None
+    return fn(*args, compiled=False), fn(*args, compiled=True)
 
 
 def assert_same(ref, got):

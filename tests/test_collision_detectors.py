@@ -7,7 +7,7 @@ import trimesh
 
 from collision_helpers import crown_like_mesh, median_split_tree, real_tooth_meshes
 from orthosim.collision import DETECTORS, Body, CollisionError, CollisionModel, CollisionRequest, detect_step
-from orthosim.collision import exact
+from orthosim.geometry import meshquery
 from orthosim.collision.circles import bounding_circles
 from orthosim.collision.motion import interpolate_pose
 from orthosim.collision.validate import ToothSet, continuous_study, dense_first_contact, discrete_study, thin_root_mesh
@@ -72,10 +72,10 @@ def test_every_intersecting_triangle_pair_lies_in_a_reported_leaf_pair():
         Tb = translation(rng.normal(size=3) * 1.5 + [7.5, 0, 0])
         Tb[:3, :3] = rotation_about_axis(rng.normal(size=3), rng.uniform(0, np.pi))
         res = detect_step(model, {2: Tb}, pairs=[(1, 2)], detector="discrete")
-        oa, ob = model.fcl_object(0), model.fcl_object(1)
-        exact.set_pose(oa, np.eye(4))
-        exact.set_pose(ob, Tb)
-        hit, (pts, faces) = exact.collide(oa, ob, all_contacts=True)
+        oa, ob = meshquery.fcl_object(model.bodies[0].mesh), meshquery.fcl_object(model.bodies[1].mesh)
+        meshquery.set_pose(oa, np.eye(4))
+        meshquery.set_pose(ob, Tb)
+        hit, (pts, faces) = meshquery.collide(oa, ob, all_contacts=True)
         if not hit:
             continue
         checked += 1
@@ -142,7 +142,7 @@ def test_a_fast_thin_root_crossing_a_crown_is_caught_although_neither_end_pose_t
         assert not detect_step(model, {2: T}, pairs=[(1, 2)], detector="discrete").touching[0]
     res = detect_step(model, {2: start}, {2: end}, pairs=[(1, 2)], detector="continuous")
     assert res.touching[0]
-    truth = dense_first_contact(model.fcl_object(0), model.fcl_object(1), np.eye(4), np.eye(4), start, end, 400)
+    truth = dense_first_contact(meshquery.fcl_object(model.bodies[0].mesh), meshquery.fcl_object(model.bodies[1].mesh), np.eye(4), np.eye(4), start, end, 400)
     assert truth is not None and res.time_of_first_contact[0] <= truth[1]
 
 
@@ -155,7 +155,7 @@ def test_a_point_swept_by_half_a_turn_hits_what_lies_on_its_arc_and_not_on_its_c
     model = two_body_model(rod, block, translation([0, 9.0, 0]))
     T1 = np.eye(4)
     T1[:3, :3] = rotation_about_axis([0, 0, 1], np.pi * 0.999)
-    truth = dense_first_contact(model.fcl_object(0), model.fcl_object(1), np.eye(4), T1,
+    truth = dense_first_contact(meshquery.fcl_object(model.bodies[0].mesh), meshquery.fcl_object(model.bodies[1].mesh), np.eye(4), T1,
                                 translation([0, 9.0, 0]), translation([0, 9.0, 0]), 400)
     assert truth is not None  # the exact motion does hit the block
     res = detect_step(model, {1: np.eye(4)}, {1: T1}, pairs=[(1, 2)], detector="continuous")
@@ -169,11 +169,11 @@ def test_refined_time_of_contact_puts_the_teeth_back_just_touching():
     res = detect_step(model, {2: start}, {2: end}, pairs=[(1, 2)], detector="continuous",
                       request=CollisionRequest(refine_time_of_contact=True, contact_tolerance_mm=0.05))
     t = res.time_of_first_contact[0]
-    oa, ob = model.fcl_object(0), model.fcl_object(1)
-    exact.set_pose(oa, np.eye(4))
-    exact.set_pose(ob, interpolate_pose(start, end, t))
-    assert not exact.collide(oa, ob)[0]  # not yet interpenetrating
-    assert exact.distance(oa, ob) <= 0.05  # and within 0.05 mm of touching
+    oa, ob = meshquery.fcl_object(model.bodies[0].mesh), meshquery.fcl_object(model.bodies[1].mesh)
+    meshquery.set_pose(oa, np.eye(4))
+    meshquery.set_pose(ob, interpolate_pose(start, end, t))
+    assert not meshquery.collide(oa, ob)[0]  # not yet interpenetrating
+    assert meshquery.distance(oa, ob) <= 0.05  # and within 0.05 mm of touching
     sphere_only = detect_step(model, {2: start}, {2: end}, pairs=[(1, 2)], detector="continuous")
     assert sphere_only.time_of_first_contact[0] <= t
 

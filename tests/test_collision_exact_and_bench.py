@@ -7,7 +7,7 @@ import trimesh
 
 from collision_helpers import median_split_tree
 from orthosim.collision import Body, CollisionModel, default_pairs, detect_step
-from orthosim.collision.exact import penetration_depth
+from orthosim.geometry.meshquery import penetration_depth
 from orthosim.pose import translation
 
 

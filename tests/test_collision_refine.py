@@ -5,10 +5,10 @@ import pytest
 import trimesh
 
 from collision_helpers import median_split_tree
-from orthosim.collision import exact
 from orthosim.collision.continuous import refine_time_of_contact
 from orthosim.collision.model import Body, CollisionModel
 from orthosim.collision.motion import relative_speed_bound
+from orthosim.geometry import meshquery
 from orthosim.pose import translation
 
 
@@ -20,13 +20,13 @@ def two_boxes():
 
 def count_distance_calls(monkeypatch):
     calls = {"n": 0}
-    original = exact.distance
+    original = meshquery.distance
 
     def counted(a, b):
         calls["n"] += 1
         return original(a, b)
 
-    monkeypatch.setattr(exact, "distance", counted)
+    monkeypatch.setattr(meshquery, "distance", counted)
     return calls
 
 

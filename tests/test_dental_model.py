@@ -5,7 +5,7 @@ import pytest
 
 from orthosim import fdi as F
 from orthosim.anatomy import dimensions
-from orthosim.collision.exact import MeshQuery
+from orthosim.geometry.meshquery import MeshQuery
 from orthosim.occlusion import bolton_ratios, mesiodistal_width, molar_relation, overbite, overjet
 from orthosim.parametric import parametric_dentition
 from orthosim.tooth import CROWN, ROOT

@@ -121,3 +121,31 @@ def test_a_cases_diastema_is_part_of_its_cached_model_not_served_from_the_same_t
             dent = load_case(tmp_path / f"{name}.toml").build_dentition()
         gaps[name] = dent.teeth[21].rest_pose[0, 3] - dent.teeth[11].rest_pose[0, 3]
     assert gaps["opened"] == pytest.approx(gaps["closed"] + 2.0)
+
+
+def test_every_module_the_builders_import_is_part_of_the_cache_key():
+    """A dentition built by code the key does not cover would be served stale after that code changes:
+    every orthosim module a builder module imports (relative imports, at any depth in the file) is a
+    builder module too, but for those that hold no geometry (errors, the cache itself) and the
+    detector package, whose broad phase only lists candidate pairs."""
+    import ast
+
+    from pathlib import Path
+
+    from orthosim import dentition_cache
+
+    package = Path(dentition_cache.__file__).resolve().parent
+    keyed = set(dentition_cache._BUILDER_MODULES)
+    missing = set()
+    for name in keyed:
+        tree = ast.parse((package / f"{name}.py").read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
+                mod = node.module.replace(".", "/")
+                if (package / mod).is_dir():  # from .package import module
+                    mods = [f"{mod}/{a.name}" for a in node.names]
+                else:
+                    mods = [mod]
+                missing.update(f"{name} imports {m}" for m in mods
+                               if m not in keyed and m.split("/")[0] not in ("errors", "collision", "dentition_cache"))
+    assert not missing, sorted(missing)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from orthosim.collision.exact import fcl_object, set_pose
+from orthosim.geometry.meshquery import fcl_object, set_pose
 from orthosim.distancemap import CONTACT, FAR, NEAR, PENETRATION, DistanceMapModel, classify, summarize
 from orthosim.fdi import Arch, arch_of
 from orthosim.parametric import parametric_dentition

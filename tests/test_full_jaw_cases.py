@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 
 from orthosim.case import load_case
+from orthosim.collision import ExactQueries
 from orthosim.movement import MovementModel, simulate
 from orthosim.movement.report import RunReport
-from orthosim.movement.simulation import _exact_distance
 
 CASES = Path(__file__).resolve().parent.parent / "cases"
 
@@ -59,6 +59,6 @@ def test_real_case3_the_opened_diastema_closes_in_both_arches():
     for pair in ((11, 21), (41, 31)):
         before, after = gap[pair]
         assert after < before - 0.5, (pair, before, after)
-        assert _exact_distance(model, last.poses, pair) < 0.1, pair
+        assert ExactQueries(model.collision).distance(pair, last.poses) < 0.1, pair
     assert max(_moved(m, (12, 22, 32, 42, 13, 23)).values()) < 0.05
     assert m["max_penetration_mm"] < 0.06

@@ -15,7 +15,8 @@ import trimesh
 from fulljaw_helpers import LOWER, UPPER, full_jaw
 from orthosim import fdi as F
 from orthosim.case import load_case
-from orthosim.collision import candidate_pairs, exact
+from orthosim.collision import candidate_pairs
+from orthosim.geometry import meshquery
 from orthosim.errors import CaseError
 from orthosim.meshload import ToothAxes, load_mesh_folder
 from orthosim.openfulljaw import AxesEstimatedWarning, estimated_axes, load_open_full_jaw
@@ -168,10 +169,10 @@ def test_scan_interpenetration_is_measured_per_pair_at_load_and_reported_in_one_
     said = [m for m in messages if "interpenetrate in the scan" in m]
     assert len(said) == 1 and "16-46" in said[0] and "rest state" in said[0]
     # exact: FCL finds every listed pair intersecting, and no other candidate pair
-    objects = {n: exact.fcl_object(t.mesh) for n, t in dent.teeth.items()}
+    objects = {n: meshquery.fcl_object(t.mesh) for n, t in dent.teeth.items()}
     for n, o in objects.items():
-        exact.set_pose(o, dent.teeth[n].rest_pose)
-    hit = {f"{a}-{b}" for a, b in candidate_pairs(dent.fdis) if exact.collide(objects[a], objects[b])[0]}
+        meshquery.set_pose(o, dent.teeth[n].rest_pose)
+    hit = {f"{a}-{b}" for a, b in candidate_pairs(dent.fdis) if meshquery.collide(objects[a], objects[b])[0]}
     assert hit == set(depths)
 
 

@@ -13,8 +13,8 @@ import pytest
 
 from fulljaw_helpers import full_jaw
 from orthosim.case import Load, load_case
+from orthosim.collision import ExactQueries
 from orthosim.movement import MovementModel, simulate
-from orthosim.movement.simulation import _exact_distance, penetrations
 
 CASE = Path(__file__).resolve().parent.parent / "cases" / "open_full_jaw_patient26.toml"
 
@@ -24,6 +24,10 @@ def _run(loads: tuple, steps: int, extractions: tuple = ()):
     case = replace(load_case(CASE), loads=loads, step_days=10.0, duration_days=10.0 * steps, extractions=extractions)
     model = MovementModel.build(case, dentition=full_jaw()[0])
     return model, list(simulate(model, "continuous"))
+
+
+def penetrations(model, poses) -> dict:
+    return ExactQueries(model.collision).penetrations(model.pairs, poses)
 
 
 def _moved(model, records, n) -> float:
@@ -47,7 +51,7 @@ def test_an_upper_incisor_retracted_sideways_into_the_lower_incisors_stops_just_
     assert 0.05 < moved < 0.6  # it moved, then the lower incisor's labial face stopped it
     last = records[-1]
     assert any(31 in e.pair and 21 in e.pair for r in records for e in r.collisions)
-    assert _exact_distance(model, last.poses, (21, 31)) < 0.05  # just touching, not sunk in
+    assert ExactQueries(model.collision).distance((21, 31), last.poses) < 0.05  # just touching, not sunk in
     assert last.max_penetration_mm < 0.06
     assert not records[-1].moving or 21 not in records[-1].moving  # it no longer moves at the end
 

@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 
 from orthosim.case import load_case
+from orthosim.collision import ExactQueries
 from orthosim.movement import MovementModel, simulate
 from orthosim.movement.report import RunReport
-from orthosim.movement.simulation import _exact_distance
 
 CASES = Path(__file__).resolve().parent.parent / "cases"
 DETECTORS = ("circles", "discrete", "continuous")
@@ -76,7 +76,7 @@ def test_case3_the_space_between_the_central_incisors_closes_in_both_arches(case
         before, after = gap[pair]
         assert after < before - 0.5  # the incisors came together
         assert pair in last.touching or pair[::-1] in last.touching  # and ended in contact, as the detector sees it
-    gaps = [_exact_distance(model, last.poses, p) for p in ((11, 21), (41, 31))]
+    gaps = [ExactQueries(model.collision).distance(p, last.poses) for p in ((11, 21), (41, 31))]
     if det == "continuous":  # stopped just touching: the diastema is gone
         assert max(gaps) < 0.05
     elif det == "discrete":  # stopped where the leaf spheres meet, a little short of the meshes

@@ -7,12 +7,11 @@ import pytest
 
 from collision_helpers import median_split_tree
 from orthosim.case import load_case
-from orthosim.collision import CollisionModel
+from orthosim.collision import CollisionModel, ExactQueries
 from orthosim.errors import CaseError
 from orthosim.movement import MovementModel, simulate
 from orthosim.movement.biomechanics import RateLaw
 from orthosim.movement.resistance import tipping_center
-from orthosim.movement.simulation import _exact_distance
 from orthosim.parametric import parametric_dentition
 
 
@@ -105,7 +104,7 @@ def test_occlusion_stops_extrusion_at_the_opposing_tooth_just_touching(built, tm
     case = _case(tmp_path, [12, 14], 'teeth = [13]\nforce_cN = 100\nmovement = "extrusion"', days=140, step=14)
     model, recs = _run(built, case, "continuous")
     first = next(r for r in recs if any(set(e.pair) == {13, 43} for e in r.collisions))
-    assert _exact_distance(model, first.poses, (13, 43)) < 0.05  # stopped just touching
+    assert ExactQueries(model.collision).distance((13, 43), first.poses) < 0.05  # stopped just touching
     assert max(r.max_penetration_mm for r in recs) < 0.05
     # the contact cut the step short: less travel than the free rate gives, at least the 1 mm gap
     moved = np.linalg.norm(first.poses[13][:3, 3] - recs[0].poses[13][:3, 3])
@@ -113,7 +112,7 @@ def test_occlusion_stops_extrusion_at_the_opposing_tooth_just_touching(built, tm
     assert 1.0 <= moved < free - 0.01
     # afterwards the canine goes no further than the lower canine gives way: they stay just touching
     for r in recs[first.step:]:
-        assert _exact_distance(model, r.poses, (13, 43)) < 0.05
+        assert ExactQueries(model.collision).distance((13, 43), r.poses) < 0.05
 
 
 def test_a_load_on_an_extracted_tooth_is_refused_before_the_run(tmp_path):

@@ -129,3 +129,27 @@ def test_a_failed_run_leaves_no_partial_video(tmp_path, dentition):
         render_run(dentition, states(), tmp_path, size=(160, 120), progress=False)
     assert not (tmp_path / "animation.mp4").exists()
     assert not [p for p in tmp_path.rglob(".*")]  # no temporary files either
+
+
+def test_render_run_reports_each_frame_to_its_caller_and_the_bench_times_render_run(tmp_path, dentition, monkeypatch):
+    motion = SyntheticMotion(dentition, n_markers=30)
+    states = [motion(i) for i in range(4)]
+    seen = []
+    render_run(dentition, states, tmp_path / "run", size=(160, 120), png=False, progress=False,
+               on_frame=lambda st, sc: seen.append((st, len(sc.markers.positions))))
+    assert [s for s, _ in seen] == states and all(n > 0 for _, n in seen)
+
+    import render.animation
+
+    calls = []
+    real = render.animation.render_run
+
+    def counted(*args, **kwargs):
+        calls.append(kwargs.get("caption"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(render.animation, "render_run", counted)
+    record = run_bench(dentition=dentition, frames=3, warmup=1, memory_frames=2, variant_rounds=1, size=(160, 120),
+                       n_markers=30, tree_build=False, staging=False, startup=False, png=False)
+    assert calls == [None]  # end_to_end (synthetic here) is render_run's own loop
+    assert record["end_to_end_synthetic"]["fps"] > 0

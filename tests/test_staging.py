@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from orthosim.case import CASES_DIR, load_case
-from orthosim.collision import exact
+from orthosim.geometry import meshquery
 from orthosim.collision.motion import interpolate_pose
 from orthosim.errors import CaseError, OrthosimError
 from orthosim.parametric import parametric_dentition
@@ -55,7 +55,7 @@ def _assert_within_limits(dent, plan):
 def _first_sampled_contact(dent, plan, samples=24, shifts=None):
     """(stage, a, b, t) of the first contact FCL finds at `samples` + 1 times of each stage's
     motion, among every pair with a moving tooth whose crowns are within 30 mm; None when none."""
-    objs = {n: exact.fcl_object(dent.teeth[n].mesh) for n in plan.teeth}
+    objs = {n: meshquery.fcl_object(dent.teeth[n].mesh) for n in plan.teeth}
     shifts = shifts or {}
     centres = {n: dent.teeth[n].to_world(dent.teeth[n].crown_center, plan.start[n]) for n in plan.teeth}
     ts = np.linspace(0.0, 1.0, samples + 1)
@@ -71,9 +71,9 @@ def _first_sampled_contact(dent, plan, samples=24, shifts=None):
                 Tx, Ty = Tx.copy(), Ty.copy()
                 Tx[:3, 3] += sx
                 Ty[:3, 3] += sy
-                exact.set_pose(objs[x], Tx)
-                exact.set_pose(objs[y], Ty)
-                if exact.collide(objs[x], objs[y])[0]:
+                meshquery.set_pose(objs[x], Tx)
+                meshquery.set_pose(objs[y], Ty)
+                if meshquery.collide(objs[x], objs[y])[0]:
                     return k + 1, x, y, t
     return None
 
@@ -122,14 +122,14 @@ def test_the_same_setup_moved_at_once_would_collide(dent, distalisation):
 
 
 def _overlap_along(dent, a, Ta, b, Tb, u, step=0.002):
-    oa, ob = exact.fcl_object(dent.teeth[a].mesh), exact.fcl_object(dent.teeth[b].mesh)
-    exact.set_pose(oa, Ta)
+    oa, ob = meshquery.fcl_object(dent.teeth[a].mesh), meshquery.fcl_object(dent.teeth[b].mesh)
+    meshquery.set_pose(oa, Ta)
     d = 0.0
     while True:
         T = Tb.copy()
         T[:3, 3] += d * u
-        exact.set_pose(ob, T)
-        if not exact.collide(oa, ob)[0]:
+        meshquery.set_pose(ob, T)
+        if not meshquery.collide(oa, ob)[0]:
             return d
         d += step
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 
 from ..cli import check_render_options, render_options, run_case
+from ..detectors import DETECTORS
 from .execute import BatchOptions, counts, run_batch
 from .plan import parse_sweep, plan_batch
 
@@ -22,7 +23,7 @@ from .plan import parse_sweep, plan_batch
 @click.argument("cases", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True,
               help="Batch folder: a run folder per variant, batch.json and batch.csv.")
-@click.option("--detector", "detectors", multiple=True, type=click.Choice(["circles", "discrete", "continuous", "exact"]),
+@click.option("--detector", "detectors", multiple=True, type=click.Choice(DETECTORS),
               help="Collision detector (repeatable: every run with each). Default: each case's own.")
 @click.option("--set", "sweeps", multiple=True, metavar="KEY=V1,V2,...",
               help="Sweep a case-file value (repeatable; the Cartesian product runs), e.g. "

@@ -6,20 +6,22 @@
 Modules: `contract` (request and result types), `model` (what never changes), `broadphase`
 (which pairs to test), `circles` (detector 1), `discrete` (detector 2), `continuous` (detector 3),
 `descent` (the shared vectorised tree descent), `time_of_contact` (Eq. 2 and step bounds),
-`motion` (pose interpolation in a step), `exact` (python-fcl reference), `detect` (the entry
-point), `bench` (timings), `validate` (accuracy studies), `memory` (a process-wide allocator
-setting worth making at the CLI entry), `commands` (`orthosim collide ...`).
+`motion` (pose interpolation in a step), `queries` (a run's exact answers on the meshes, through
+`orthosim.geometry.meshquery`), `detect` (the entry points: `detect_step`, `contacts`), `bench`
+(timings), `validate` (accuracy studies), `memory` (a process-wide allocator setting worth making
+at the CLI entry), `commands` (`orthosim collide ...`).
 """
 
 from .broadphase import arch_neighbour_pairs, candidate_pairs, facing_pairs, sweep_and_prune
-from .contract import DETECTORS, CollisionError, CollisionRequest, PairResult, StepResult
-from .detect import default_pairs, detect_step
+from .contract import DETECTORS, CollisionError, CollisionRequest, Contacts, PairResult, StepResult
+from .detect import contacts, default_pairs, detect_step
 from .model import Body, CollisionModel
 from .motion import interpolate_pose
+from .queries import ExactQueries
 from .time_of_contact import first_time_of_contact
 
 __all__ = [
-    "Body", "CollisionError", "CollisionModel", "CollisionRequest", "DETECTORS", "PairResult", "StepResult",
-    "arch_neighbour_pairs", "candidate_pairs", "default_pairs", "detect_step", "facing_pairs",
+    "Body", "CollisionError", "CollisionModel", "CollisionRequest", "Contacts", "DETECTORS", "ExactQueries", "PairResult",
+    "StepResult", "arch_neighbour_pairs", "candidate_pairs", "contacts", "default_pairs", "detect_step", "facing_pairs",
     "first_time_of_contact", "interpolate_pose", "sweep_and_prune",
 ]

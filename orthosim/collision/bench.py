@@ -14,10 +14,11 @@ from typing import Callable, Mapping, Sequence
 import fcl
 import numpy as np
 
-from . import exact
+from ..geometry import meshquery
 from .contract import CollisionRequest
 from .detect import default_pairs, detect_step
 from .model import CollisionModel
+from .queries import ExactQueries
 
 
 def round_robin_us(fns: dict[str, Callable[[], object]], repeats: int) -> dict[str, np.ndarray]:
@@ -77,9 +78,11 @@ def collision_timings(dentition, poses: Mapping[int, np.ndarray] | None = None, 
     all_pairs = CollisionRequest(all_leaf_pairs=True)
     pair_idx = model.pair_indices(pairs)
 
+    queries = ExactQueries(model)
+
     def fcl_objects(poses_):
         P = model.pose_array(poses_)
-        return [(model.fcl_object(a), model.fcl_object(b), P[a], P[b]) for a, b in pair_idx]
+        return [(queries.object(a), queries.object(b), P[a], P[b]) for a, b in pair_idx]
 
     at_end, at_start = fcl_objects(poses_end), fcl_objects(poses)
 
@@ -87,8 +90,8 @@ def collision_timings(dentition, poses: Mapping[int, np.ndarray] | None = None, 
         req = fcl.CollisionRequest(num_max_contacts=10**7, enable_contact=True) if all_contacts else fcl.CollisionRequest()
         hits = 0
         for oa, ob, Ta, Tb in objs:
-            exact.set_pose(oa, Ta)
-            exact.set_pose(ob, Tb)
+            meshquery.set_pose(oa, Ta)
+            meshquery.set_pose(ob, Tb)
             res = fcl.CollisionResult()
             fcl.collide(oa, ob, req, res)
             hits += res.is_collision

@@ -17,21 +17,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import exact
 from .descent import compiled_descent, descend, sphere_overlap_test
 from .model import FLOAT32_MARGIN_MM, CollisionModel
 from .motion import PosePath, chord_deviation_bound, max_speed, relative_speed_bound, rotation_angle
+from .queries import ExactQueries
 from .time_of_contact import contact_interval, contact_interval_from_dots, min_distance_over_step
 
 
 def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, pair_idx: np.ndarray, first_only: bool = False,
-                 world0: np.ndarray | None = None, world1: np.ndarray | None = None):
+                 world0: np.ndarray | None = None, world1: np.ndarray | None = None, compiled: bool = True):
     """(pair, node a, node b, t, leave): leaf pairs that may touch in the step, Eq. 2's first time.
 
     poses0, poses1: (n, 4, 4) poses at t = 0 and t = 1 in model body order; pair_idx (p, 2).
     t: (m,) in [0, 1), never later than the first contact of the leaves' contents; leave: (m,)
     when the (inflated) spheres stop overlapping along their chords. world0, world1:
-    `model.world_centers` of poses0, poses1 when the caller has them already.
+    `model.world_centers` of poses0, poses1 when the caller has them already. compiled: the
+    compiled descent when numba is installed (the same results), False for the numpy descent.
 
     Every node is placed at both ends by two batched matrix products (arch frame). Node pairs are
     pruned with the swept-sphere bound: a node's chord lies in the sphere about its midpoint M of
@@ -43,9 +44,9 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
     W1 = model.world_centers(poses1) if world1 is None else world1
     D = W1 - W0  # chord of every node centre
     per_body = chord_deviation_bound(rotation_angle(poses0, poses1), 1.0)
-    compiled = compiled_descent()
-    if compiled is not None:  # the same arrays in one compiled pass (a third of this detector's set-up time)
-        mid, R, Rs = compiled.swept_bounds(model, W0, W1, per_body, FLOAT32_MARGIN_MM)
+    walk = compiled_descent(compiled)
+    if walk is not None:  # the same arrays in one compiled pass (a third of this detector's set-up time)
+        mid, R, Rs = walk.swept_bounds(model, W0, W1, per_body, FLOAT32_MARGIN_MM)
     else:
         R = model.radii + np.repeat(per_body, model.stride) * model.rho  # grown by the centre's chord deviation
         mid = (W0 + 0.5 * D).astype(np.float32)
@@ -63,9 +64,9 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
         ok = ~np.isnan(enter)
         return ok, {"t": enter, "leave": leave}
 
-    if compiled is not None:
+    if walk is not None:
         # the same leaf pairs pass the same prune, in the same order; Eq. 2 then runs on them all at once
-        pair, la, lb = compiled.leaf_pairs(model, mid, Rs, pair_idx)
+        pair, la, lb = walk.leaf_pairs(model, mid, Rs, pair_idx)
         ok, payload = at_leaves(None, la, lb)
         pair, la, lb = pair[ok], la[ok], lb[ok]
         payload = {k: v[ok] for k, v in payload.items()}
@@ -124,18 +125,18 @@ def _earliest(pair, la, lb, t, leave, first_only):
 
 def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, T0b, T1b, t_start: float,
                            tolerance: float = 0.05, max_iterations: int = 2000,
-                           distances: exact.DistanceMemo | None = None) -> float | None:
+                           queries: ExactQueries | None = None) -> float | None:
     """Advance a conservative first time of contact on the exact meshes of bodies i_a, i_b.
 
     Returns a time in [t_start, 1) no later than the meshes' first contact (up to FCL's own
     accuracy), within `tolerance` mm of travel of it whenever it returns before `max_iterations`;
-    None when conservative advancement proves the meshes stay apart until t = 1. `distances`: a
-    caller's `exact.DistanceMemo` of this model (a refinement from t = 0 often asks what the caller
-    asked already about the step's start poses); the same answers, fewer FCL queries.
+    None when conservative advancement proves the meshes stay apart until t = 1. `queries`: the
+    run's `ExactQueries` of this model (a refinement from t = 0 often asks what the caller asked
+    already about the step's start poses: the same answers, fewer FCL queries); one is made for
+    this call when None.
     """
-    if distances is None:
-        distances = exact.DistanceMemo(model.fcl_object, size=16)
-    oa, ob = model.fcl_object(i_a), model.fcl_object(i_b)
+    if queries is None:
+        queries = ExactQueries(model, memo_size=16)
     # Strides use the bound on how fast the gap can close (relative motion); the tolerance is
     # travel of the teeth themselves, so teeth moving together are still stopped precisely.
     mu = relative_speed_bound(T0a, T1a, model.rho_max[i_a], T0b, T1b, model.rho_max[i_b])
@@ -143,18 +144,16 @@ def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, 
 
     path_a, path_b = PosePath(T0a, T1a), PosePath(T0b, T1b)
 
-    def at(t):
-        exact.set_pose(oa, path_a.at(t))
-        exact.set_pose(ob, path_b.at(t))
+    def collide_at(t) -> bool:
+        return queries.body_intersects(i_a, path_a.at(t), i_b, path_b.at(t))
 
     t = float(t_start)
     if mu <= 0:
-        at(t)
-        return t if exact.collide(oa, ob)[0] else None
+        return t if collide_at(t) else None
     for _ in range(max_iterations):
         if t >= 1.0:
             return None
-        d = distances(i_a, path_a.at(t), i_b, path_b.at(t))
+        d = queries.body_distance(i_a, path_a.at(t), i_b, path_b.at(t))
         if d <= 0.0:
             return t
         if t + d / mu >= 1.0:  # the gap cannot close within the step: no contact, by the speed bound
@@ -163,8 +162,7 @@ def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, 
             t_probe = t + tolerance / travel
             if t_probe >= 1.0:
                 return t  # contact, if any, lies within tolerance of travel: report conservatively
-            at(t_probe)
-            if exact.collide(oa, ob)[0]:
+            if collide_at(t_probe):
                 return t
         t += d / mu
     return t

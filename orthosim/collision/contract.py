@@ -17,9 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..detectors import DETECTORS
 from ..errors import OrthosimError
-
-DETECTORS = ("circles", "discrete", "continuous", "exact")
 
 
 class CollisionError(OrthosimError):
@@ -37,11 +36,14 @@ class CollisionRequest:
         True then advances it on the exact meshes (conservative advancement with exact distances,
         see `continuous.refine_time_of_contact`) to within `contact_tolerance_mm` of travel.
     contact_tolerance_mm: travel tolerance (mm) of the refined time of first contact.
+    touch_tolerance_mm: `contacts`: the exact and continuous detectors count two meshes this close
+        (mm) as touching.
     """
 
     all_leaf_pairs: bool = True
     refine_time_of_contact: bool = False
     contact_tolerance_mm: float = 0.05
+    touch_tolerance_mm: float = 0.05
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,7 +82,8 @@ class StepResult:
     pair_of_leaf: (m,) int64 index into `pairs` of each overlapping leaf pair.
     leaf_pairs, centers_a, centers_b, radii_a, radii_b: as in `PairResult`, concatenated over pairs.
     detector: which detector produced this ("circles", "discrete", "continuous", "exact").
-    distance: (p,) float64 mm, exact detector only (NaN otherwise).
+    distance: (p,) float64 mm per pair from the exact detector; empty (length 0) from the others,
+        which measure no distance (`pair(i).distance` is then None).
     """
 
     detector: str
@@ -130,6 +133,27 @@ class StepResult:
 
     def by_pair(self) -> dict[tuple[int, int], PairResult]:
         return {(int(a), int(b)): self.pair(i) for i, (a, b) in enumerate(self.pairs)}
+
+
+@dataclass(frozen=True, eq=False)
+class Contacts:
+    """The contacts of one set of poses, as a detector sees them (`detect.contacts`).
+
+    touching: pairs (FDI) in contact, in the order of the pairs asked about.
+    centers (n, 3) mm, radii (n,) mm: what is drawn as contact: overlapping leaf spheres of the
+        touching pairs (both teeth's) for the sphere-tree detectors, one lens sphere per pair for
+        circles, none for the exact detector.
+    penetration: pair -> mm for every pair asked about whose exact meshes interpenetrate, in the
+        order of the pairs asked about (pairs apart are left out).
+    distance: pair -> mm between the exact meshes, for the pairs whose distance decided contact
+        (exact: every pair; continuous: the pairs whose leaf spheres overlap; none otherwise).
+    """
+
+    touching: tuple[tuple[int, int], ...]
+    centers: np.ndarray
+    radii: np.ndarray
+    penetration: dict[tuple[int, int], float]
+    distance: dict[tuple[int, int], float]
 
 
 def empty_leaves() -> dict[str, np.ndarray]:

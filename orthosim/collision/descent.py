@@ -19,17 +19,15 @@ import numpy as np
 
 from .model import CollisionModel
 
-# `discrete.overlapping_leaves` and `continuous.swept_leaves` run the compiled descent
-# (`descent_compiled`, the same results) when this is True and numba is installed; False: this
-# module's numpy descent, the reference.
-USE_COMPILED = True
 _compiled = []  # the descent_compiled module, or None without numba (imported on first use)
 
 
-def compiled_descent():
-    """The `descent_compiled` module when the compiled descent is to be used, else None. Imported on
-    first use, so that processes that never descend do not pay numba's import (about 0.3 s)."""
-    if not USE_COMPILED:
+def compiled_descent(use: bool = True):
+    """The `descent_compiled` module (the same results as this module's numpy descent, the
+    reference) when `use` and numba is installed, else None. `discrete.overlapping_leaves` and
+    `continuous.swept_leaves` take `compiled=` for it. Imported on first use, so that processes
+    that never descend do not pay numba's import (about 0.3 s)."""
+    if not use:
         return None
     if not _compiled:
         from . import descent_compiled

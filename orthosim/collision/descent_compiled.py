@@ -28,7 +28,7 @@ try:
 except ImportError:  # pragma: no cover - numba is optional
     njit = None
 
-AVAILABLE = njit is not None  # `descent.compiled_descent` chooses this walk when True (and USE_COMPILED)
+AVAILABLE = njit is not None  # `descent.compiled_descent` chooses this walk when True (and asked to)
 
 if AVAILABLE:
 

@@ -13,14 +13,15 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .. import fdi as fdi_mod
-from . import exact
+from ..geometry import meshquery
 from .broadphase import candidate_pairs, sweep_and_prune
 from .circles import bounding_circles, circles_overlap, overlap_spheres
 from .continuous import refine_time_of_contact, swept_leaves
-from .contract import DETECTORS, CollisionError, CollisionRequest, StepResult, empty_leaves
+from .contract import DETECTORS, CollisionError, CollisionRequest, Contacts, StepResult, empty_leaves
 from .discrete import overlapping_leaves
 from .model import CollisionModel
 from .motion import chord_deviation_bound, interpolate_poses, rotation_angle
+from .queries import ExactQueries
 
 
 DRAW_TOLERANCE_MM = 1e-3  # leaf centres drawn on their chords when the true path strays less
@@ -47,14 +48,14 @@ def default_pairs(model: CollisionModel, poses: np.ndarray | None = None, absent
 
 def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], poses_end: Mapping[int, np.ndarray] | None = None,
                 pairs: Sequence[tuple[int, int]] | None = None, detector: str = "discrete",
-                request: CollisionRequest = CollisionRequest(), distances: exact.DistanceMemo | None = None) -> StepResult:
+                request: CollisionRequest = CollisionRequest(), queries: ExactQueries | None = None) -> StepResult:
     """Test every candidate pair of one step with one detector.
 
     poses_start, poses_end: FDI -> (4, 4) local -> arch frame (mm); teeth not given keep their rest pose.
     pairs: (FDI a, FDI b) to test; the broad phase (`default_pairs`) when None.
     detector: "circles", "discrete", "continuous" or "exact".
-    distances: the caller's `exact.DistanceMemo` of this model, used by the refinement of the
-        continuous detector's time of contact (same answers, fewer FCL queries).
+    queries: the run's `ExactQueries` of this model, for the exact detector and the refinement of
+        the continuous detector's time of contact (one is made for this call when None).
     """
     if detector not in DETECTORS:
         raise CollisionError(None, "detector", f"unknown detector {detector!r}", f"use one of {', '.join(DETECTORS)}")
@@ -77,7 +78,7 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
                       centers_a=centers, centers_b=centers.copy(), radii_a=radii, radii_b=radii.copy())
         return StepResult("circles", pairs_arr, touching, nan, **leaves)
     if detector == "exact":
-        return _exact_step(model, P1, pairs_arr, pair_idx, request)
+        return _exact_step(P1, pairs_arr, pair_idx, request, queries or ExactQueries(model))
     first_only = not request.all_leaf_pairs
     if detector == "discrete":
         W = model.world_centers(P1)
@@ -92,10 +93,11 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
     np.minimum.at(toc, pair, t)
     toc[np.isinf(toc)] = np.nan
     if request.refine_time_of_contact:
+        queries = queries or ExactQueries(model)
         for i in np.flatnonzero(~np.isnan(toc)):
             a, b = pair_idx[i]
             r = refine_time_of_contact(model, a, b, P0[a], P1[a], P0[b], P1[b], toc[i], request.contact_tolerance_mm,
-                                       distances=distances)
+                                       queries=queries)
             toc[i] = np.nan if r is None else r
     # the contact regions drawn are the leaf pairs overlapping when their pair first touches
     at = toc[pair]
@@ -147,7 +149,7 @@ def _leaf_arrays(model, pair_idx, pair, la, lb, Pa, Pb, per_pair=False, W=None):
     )
 
 
-def _exact_step(model, P, pairs_arr, pair_idx, request):
+def _exact_step(P, pairs_arr, pair_idx, request, queries: ExactQueries):
     """FCL on every pair: touching, distance; with all_leaf_pairs, contact points as zero-radius
     'leaves' and the intersecting face index pairs in `leaf_pairs`."""
     p = len(pair_idx)
@@ -155,12 +157,9 @@ def _exact_step(model, P, pairs_arr, pair_idx, request):
     dist = np.zeros(p)
     pts, faces, owner = [], [], []
     for i, (a, b) in enumerate(pair_idx):
-        oa, ob = model.fcl_object(a), model.fcl_object(b)
-        exact.set_pose(oa, P[a])
-        exact.set_pose(ob, P[b])
-        hit, contacts = exact.collide(oa, ob, all_contacts=request.all_leaf_pairs)
+        hit, contacts = meshquery.collide(queries.placed(a, P[a]), queries.placed(b, P[b]), all_contacts=request.all_leaf_pairs)
         touching[i] = hit
-        dist[i] = 0.0 if hit else exact.distance(oa, ob)
+        dist[i] = 0.0 if hit else queries.body_distance(a, P[a], b, P[b])
         if contacts is not None and len(contacts[0]):
             pts.append(contacts[0])
             faces.append(contacts[1])
@@ -171,3 +170,40 @@ def _exact_step(model, P, pairs_arr, pair_idx, request):
         leaves.update(pair_of_leaf=np.concatenate(owner).astype(np.int64), leaf_pairs=np.concatenate(faces),
                       centers_a=c, centers_b=c.copy(), radii_a=np.zeros(len(c)), radii_b=np.zeros(len(c)))
     return StepResult("exact", pairs_arr, touching, np.full(p, np.nan), distance=dist, **leaves)
+
+
+def contacts(model: CollisionModel, poses: Mapping[int, np.ndarray], request: CollisionRequest, queries: ExactQueries,
+             pairs: Sequence[tuple[int, int]] | None = None, detector: str = "continuous") -> Contacts:
+    """The contacts of the bodies at `poses` as `detector` sees them: touching pairs, what is drawn
+    as contact, and the exact interpenetration (and, where it decided contact, distance) of the pairs.
+
+    Touching: circles: overlapping bounding circles; discrete: overlapping leaf spheres; continuous:
+    overlapping leaf spheres whose exact meshes are also within `request.touch_tolerance_mm`; exact:
+    exact meshes within that tolerance. pairs: FDI pairs to look at (the broad phase when None).
+    """
+    if detector not in DETECTORS:
+        raise CollisionError(None, "detector", f"unknown detector {detector!r}", f"use one of {', '.join(DETECTORS)}")
+    if pairs is None:
+        pairs = default_pairs(model, model.pose_array(poses))
+    pairs = [tuple(map(int, p)) for p in pairs]
+    tol = request.touch_tolerance_mm
+    distance: dict[tuple[int, int], float] = {}
+    if detector == "exact":
+        distance = {p: queries.distance(p, poses) for p in pairs}
+        touching = [p for p in pairs if distance[p] <= tol]
+        centers, radii = np.zeros((0, 3)), np.zeros(0)
+    else:
+        res = detect_step(model, poses, None, pairs, "circles" if detector == "circles" else "discrete",
+                          CollisionRequest(all_leaf_pairs=True))
+        touching = res.touching_pairs()
+        if detector == "continuous":
+            distance = {p: queries.distance(p, poses) for p in touching}
+            touching = [p for p in touching if distance[p] <= tol]
+        kept = set(touching)
+        keep = np.isin(res.pair_of_leaf, [i for i, p in enumerate(map(tuple, res.pairs.tolist())) if p in kept])
+        if detector == "circles":  # one lens per pair, given for both teeth
+            centers, radii = res.centers_a[keep], res.radii_a[keep]
+        else:
+            centers = np.concatenate([res.centers_a[keep], res.centers_b[keep]])
+            radii = np.concatenate([res.radii_a[keep], res.radii_b[keep]])
+    return Contacts(tuple(touching), centers, radii, queries.penetrations(pairs, poses), distance)

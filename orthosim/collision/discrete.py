@@ -8,7 +8,7 @@ resolution) absorbs float32 rounding so the test stays conservative. Because eve
 the leaf's ancestors), two meshes that intersect always have an overlapping leaf pair here.
 
 The descent runs compiled (`descent_compiled`, numba) when numba is installed: the same leaf pairs
-in the same order, about 3x faster than the numpy descent (`descent.USE_COMPILED = False` for it).
+in the same order, about 3x faster than the numpy descent (`compiled=False` for it).
 """
 
 from __future__ import annotations
@@ -20,17 +20,18 @@ from .model import CollisionModel
 
 
 def overlapping_leaves(model: CollisionModel, poses: np.ndarray, pair_idx: np.ndarray, first_only: bool = False,
-                       world: np.ndarray | None = None):
+                       world: np.ndarray | None = None, compiled: bool = True):
     """(pair, node a, node b): flat node indices of every overlapping leaf pair.
 
     poses: (n, 4, 4) local -> arch frame in model body order; pair_idx: (p, 2) body indices;
-    world: `model.world_centers(poses)` when the caller has it already.
+    world: `model.world_centers(poses)` when the caller has it already. compiled: the compiled
+    descent when numba is installed (the same results), False for the numpy descent.
     """
     flat = (model.world_centers(poses) if world is None else world).astype(np.float32)
     r = model.radii32
-    compiled = compiled_descent()
-    if compiled is not None:
-        return compiled.leaf_pairs(model, flat, r, pair_idx, first_only)
+    walk = compiled_descent(compiled)
+    if walk is not None:
+        return walk.leaf_pairs(model, flat, r, pair_idx, first_only)
     pair, la, lb, _ = descend(model, pair_idx, sphere_overlap_test(model, flat, r), first_only=first_only)
     return pair, la, lb
 

@@ -1,7 +1,8 @@
 """The collision model of a dentition: everything detectors need that never changes during a run.
 
-Built once (MuJoCo's mjModel in our STYLE): per tooth its sphere tree, its bounding circle data and,
-on first use, its exact FCL mesh model. The sphere trees of all teeth are concatenated level by
+Built once (MuJoCo's mjModel in our STYLE): per tooth its sphere tree, its bounding circle data and
+its mesh. Exact queries on the meshes re-pose FCL objects: that is a run's state, kept by
+`queries.ExactQueries`, not here. The sphere trees of all teeth are concatenated level by
 level into global arrays, so a descent can handle the node pairs of every tooth pair at once with
 numpy. A step's state is just the poses (dict FDI -> (4, 4) local -> arch frame, mm).
 """
@@ -40,7 +41,7 @@ class Body:
 
 @dataclass(eq=False)
 class CollisionModel:
-    """Sphere trees, bounding circles and exact meshes of every body, built once.
+    """Sphere trees, bounding circles and meshes of every body, built once; never changed by a query.
 
     The trees are flattened body-major into padded arrays so that one batched matrix product
     places every node of every tooth, and the placed coordinates need no transposing: body i owns
@@ -106,7 +107,6 @@ class CollisionModel:
         self.split_key = np.where(self.child_count > 0, self.radii, -1.0).astype(np.float32)
         self._circle = _circle_data(self.bodies)
         self.rho_max = np.array([np.linalg.norm(b.mesh.vertices, axis=1).max() for b in self.bodies])
-        self._fcl: dict[int, object] = {}
 
     def roots(self, body_idx: np.ndarray) -> np.ndarray:
         """Flat node index of the root of each body."""
@@ -180,16 +180,6 @@ class CollisionModel:
             if i is not None:
                 out[i] = T
         return out
-
-    def fcl_object(self, i: int):
-        """The body's python-fcl BVH collision object (built on first use, then kept)."""
-        obj = self._fcl.get(i)
-        if obj is None:
-            from .exact import fcl_object
-
-            obj = fcl_object(self.bodies[i].mesh)
-            self._fcl[i] = obj
-        return obj
 
     @classmethod
     def from_dentition(cls, dentition, tree_builder: Callable[[trimesh.Trimesh], SphereTree] | None = None,

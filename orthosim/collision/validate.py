@@ -17,6 +17,7 @@ bisection: contacts that begin and end between two samples are invisible to it).
 from __future__ import annotations
 
 import time
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
@@ -26,12 +27,13 @@ import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from . import exact
+from ..geometry import meshquery as exact
 from .continuous import refine_time_of_contact, swept_leaves_posed
 from .discrete import overlapping_leaves_posed
 from ..atomic import write_json
 from .model import Body, CollisionModel, default_tree_builder
 from .motion import interpolate_pose, max_speed
+from .queries import ExactQueries
 
 OFFSET_MM = 0.5  # near contact: signed offset from first contact within +/- this
 FP_THRESHOLDS_MM = (0.1, 0.25, 0.5, 1.0, 2.0)
@@ -39,6 +41,17 @@ FP_THRESHOLDS_MM = (0.1, 0.25, 0.5, 1.0, 2.0)
 # leaf sphere shows as a contact claimed at a small separation, which a cumulative "> x mm" rate
 # dilutes with the many far poses no tree calls touching.
 FP_BANDS_MM = ((0.0, 0.1), (0.1, 0.25), (0.25, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, np.inf))
+
+
+_QUERIES: "weakref.WeakKeyDictionary[CollisionModel, ExactQueries]" = weakref.WeakKeyDictionary()
+
+
+def _object(model: CollisionModel, i: int):
+    """Body i's FCL object, owned by this module's `ExactQueries` of the model (one per model)."""
+    queries = _QUERIES.get(model)
+    if queries is None:
+        queries = _QUERIES[model] = ExactQueries(model)
+    return queries.object(i)
 
 
 def band_name(lo: float, hi: float) -> str:
@@ -116,7 +129,7 @@ def _pairs_of(ts: ToothSet) -> list[tuple[int, int]]:
 
 def _near_contact_pose(model, rng, i, j, lo, hi):
     """(Ta, Tb, offset, u) with b at a random signed offset in [lo, hi] mm from first contact."""
-    oa, ob = model.fcl_object(i), model.fcl_object(j)
+    oa, ob = _object(model, i), _object(model, j)
     s_far = model.rho_max[i] + model.rho_max[j] + 1.0
     while True:
         Ra, Rb = Rotation.random(2, random_state=rng).as_matrix()
@@ -145,7 +158,7 @@ def discrete_study(tooth_sets: Sequence[ToothSet], n_poses: int, tree_builder=No
         for k in range(n_poses):
             i, j = pairs[rng.integers(len(pairs))]
             Ta, Tb, off, _ = _near_contact_pose(model, rng, idx[i], idx[j], *offset_range)
-            oa, ob = model.fcl_object(idx[i]), model.fcl_object(idx[j])
+            oa, ob = _object(model, idx[i]), _object(model, idx[j])
             exact.set_pose(oa, Ta)
             exact.set_pose(ob, Tb)
             hit = exact.collide(oa, ob)[0]
@@ -292,7 +305,7 @@ def continuous_study(tooth_sets: Sequence[ToothSet], n_motions: int, tree_builde
         rows = []
         t_refine = 0.0
         for k, (ia, ib, kind, T0a, T1a, T0b, T1b) in enumerate(recs):
-            oa, ob = model.fcl_object(ia), model.fcl_object(ib)
+            oa, ob = _object(model, ia), _object(model, ib)
             truth = dense_first_contact(oa, ob, T0a, T1a, T0b, T1b, samples)
             ends = []
             for Pa, Pb in ((T0a, T0b), (T1a, T1b)):

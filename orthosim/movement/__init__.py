@@ -3,11 +3,12 @@ contacts, collision response, and the step loop that ties them to the collision 
 
 Modules: `resistance` (centre of resistance rules), `biomechanics` (force system -> motion, rate
 law), `propagation` (forces passed on between touching teeth), `impact` (momentum-conserving
-impact response), `simulation` (the step loop), `report` (metrics.json and distances.csv).
+impact response), `simulation` (model, state and the step's phases; `simulate`), `report`
+(metrics.json and distances.csv).
 """
 
 from .biomechanics import Motion, RateLaw, ToothMechanics, build_mechanics, movement_type, tooth_motion
-from .simulation import MovementModel, MovementSettings, StepRecord, simulate
+from .simulation import MovementModel, MovementSettings, StepRecord, StepState, initial_state, simulate, step
 
-__all__ = ["Motion", "MovementModel", "MovementSettings", "RateLaw", "StepRecord", "ToothMechanics",
-           "build_mechanics", "movement_type", "simulate", "tooth_motion"]
+__all__ = ["Motion", "MovementModel", "MovementSettings", "RateLaw", "StepRecord", "StepState", "ToothMechanics",
+           "build_mechanics", "initial_state", "movement_type", "simulate", "step", "tooth_motion"]

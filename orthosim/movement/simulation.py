@@ -4,33 +4,36 @@
     for record in simulate(model, detector="continuous"):
         ...                                           # one StepRecord per step (step 0 = initial)
 
-Each step (the paper's frame) of `step_days`:
-1. Forces: the case's loads (directions along the arch: toward the next present tooth, the paper's
-   director vector) plus forces passed on by touching teeth (`propagation`): a tooth pushing into
-   a touching tooth is blocked in that direction and passes a share of its push on, down the arch.
-   A blocked tooth whose neighbour gives way follows it (teeth in contact move together).
-2. Motion: each tooth's motion under its free force (`biomechanics`, wire models and rate law);
-   its intended pose at the end of the step. Between the step's ends a tooth moves as
-   `collision.motion.interpolate_pose` says, the motion the continuous detector sweeps.
-3. Collisions: pairs of teeth that may meet (arch neighbours skipping extracted teeth; facing teeth
-   of the other arch, for a tooth moving in any direction) are tested with the chosen detector.
-   A pair already in contact at the step's start (touching, or interpenetrating as a scan left it:
-   the rest state) is tested only when the move takes the two into each other: for arch
-   neighbours, when the exact meshes come closer or sink deeper; for facing teeth (the occlusal
-   rule: cusps in contact may slide along each other), only when the exact meshes end the step
-   interpenetrating deeper than at rest (step 0) by more than `occlusal_slide_mm` for a pair in
-   contact at step 0 (the bite as the model stands), `touch_tolerance_mm` for one the run made.
-   Continuous: every mover is cut back to its
-   earliest time of first contact (refined on the exact meshes to `contact_tolerance_mm`), so the
-   teeth stop just touching; cutting one tooth may put it in another's way, so detection repeats
-   on the cut motions (a few rounds). Discrete detectors (bounding circles, discrete sphere trees,
-   exact meshes) test the end poses: a tooth found overlapping stops there, so it may have sunk
-   into its neighbour by up to one step's travel, which is the paper's point about them.
-   Each collision's rigid-body impact response is computed and reported (`impact`).
-4. Contacts at the new poses give the touching set of the next step; the exact meshes give the
-   largest interpenetration; the paper's tooth-to-tooth distances are measured.
-
-Model (built once) and state (poses, touching pairs) are kept apart: a step never rebuilds geometry.
+As MuJoCo keeps them, the model (`MovementModel`, frozen, built once) and the state (`StepState`,
+frozen: poses, touching pairs, the rest state's interpenetration, the run's exact queries and their
+memos) are apart; `step(model, state) -> (state, record)` makes one step (the paper's frame) of
+`step_days` in five phases, each a function of its own:
+1. `forces`: the case's loads (`AppliedLoad`; directions along the arch: toward the next present
+   tooth, the paper's director vector) plus forces passed on by touching teeth (`propagation`): a
+   tooth pushing into a touching tooth is blocked in that direction and passes a share of its
+   push on, down the arch.
+2. `motions`: each tooth's motion under its free force (`biomechanics`, wire models and rate law);
+   a blocked tooth whose neighbour gives way follows it (teeth in contact move together). Between
+   the step's ends a tooth moves as `collision.motion.interpolate_pose` says, the motion the
+   continuous detector sweeps.
+3. `detection`: pairs of teeth that may meet (arch neighbours skipping extracted teeth; facing
+   teeth of the other arch) are tested with the run's detector. A pair already in contact at the
+   step's start (touching, or interpenetrating as a scan left it: the rest state) is tested only
+   when the move takes the two into each other: for arch neighbours, when the exact meshes come
+   closer or sink deeper; for facing teeth (the occlusal rule: cusps in contact may slide along
+   each other), only when the exact meshes end the step interpenetrating deeper than at rest by
+   more than `occlusal_slide_mm` for a pair in contact at step 0 (the bite as the model stands),
+   `touch_tolerance_mm` for one the run made. Continuous: every mover is cut back to its earliest time of
+   first contact (refined on the exact meshes to `contact_tolerance_mm`), so the teeth stop just
+   touching; cutting one tooth may put it in another's way, so detection repeats on the cut
+   motions (a few rounds). Discrete detectors (bounding circles, discrete sphere trees, exact
+   meshes) test the end poses: a tooth found overlapping stops there, so it may have sunk into
+   its neighbour by up to one step's travel, which is the paper's point about them.
+4. `contacts_at`: the contacts at the new poses (`collision.contacts`) give the touching set of
+   the next step and the exact interpenetration.
+5. `response`: each collision's rigid-body impact response (`impact`), one event per pair.
+The record (`StepRecord`) adds the paper's tooth-to-tooth distances. Every exact question goes
+to the run's `collision.ExactQueries`; a step never rebuilds geometry.
 Units: mm, degrees in reports, cN, cN*mm, days.
 """
 
@@ -43,18 +46,16 @@ import numpy as np
 
 from .. import fdi as F
 from ..case import Case, Load
-from ..collision import CollisionModel, CollisionRequest, candidate_pairs, detect_step, interpolate_pose
-from ..collision import exact
+from ..collision import (CollisionModel, CollisionRequest, Contacts, ExactQueries, candidate_pairs, contacts, detect_step,
+                         interpolate_pose)
 from ..dentition import Dentition
+from ..detectors import DETECTORS
 from ..errors import CaseError
 from ..interpenetration import default_occlusal_slide_mm
 from ..metrics import PairDistance, tooth_to_tooth_distances
 from .biomechanics import Motion, RateLaw, ToothMechanics, build_mechanics, tooth_motion
 from .impact import Body, impact
 from .propagation import ForceBalance, propagate
-
-SIM_DETECTORS = ("circles", "discrete", "continuous", "exact")
-
 
 @dataclass(frozen=True)
 class MovementSettings:
@@ -141,9 +142,10 @@ class StepRecord:
         return float(sum(d.distance_mm for d in self.distances))
 
 
-@dataclass(eq=False)
+@dataclass(frozen=True, eq=False)
 class MovementModel:
-    """What never changes during a run: the case, the dentition, its collision model, each tooth's mechanics."""
+    """What never changes during a run: the case, the dentition, its collision model (sphere trees),
+    each tooth's mechanics, the settings, and what follows from them (present teeth, candidate pairs)."""
 
     case: Case
     dentition: Dentition
@@ -205,26 +207,37 @@ def arch_direction(model: MovementModel, poses: Mapping[int, np.ndarray], fdi: i
     """(3,) unit arch-frame vector 'mesial' or 'distal' for a tooth at `poses`: toward the crown centre
     of the next present tooth that way along the arch (the paper's director vector), or along the
     tooth's own mesiodistal axis at the end of the arch. centers: the crown centres at `poses`
-    (`_crown_centers`) when the caller has them."""
+    (`Dentition.crown_centers`) when the caller has them."""
     order = _present_in_arch(model, fdi)
     i = order.index(fdi)
     j = i + _arch_step(fdi, direction)
     tooth = model.dentition.teeth[fdi]
     R = poses[fdi][:3, :3]
     if 0 <= j < len(order):
-        if centers is not None:
-            return _horizontal(centers[order[j]] - centers[fdi])
-        other = model.dentition.teeth[order[j]]
-        c_other = other.to_world(other.crown_center, poses[order[j]])
-        return _horizontal(c_other - tooth.to_world(tooth.crown_center, poses[fdi]))
+        if centers is None:
+            centers = model.dentition.crown_centers(poses)
+        return _horizontal(centers[order[j]] - centers[fdi])
     sign = 1.0 if direction == "mesial" else -1.0
     return _horizontal(sign * (R @ tooth.mesial))
 
 
-def load_vectors(model: MovementModel, poses: Mapping[int, np.ndarray], load: Load, fdi: int,
-                 centers: Mapping[int, np.ndarray] | None = None):
-    """(force (3,) cN, point (3,) mm, couple (3,) cN*mm) of one load on one tooth, arch frame, at `poses`
-    (centers: the crown centres at `poses`, when the caller has them)."""
+@dataclass(frozen=True, eq=False)
+class AppliedLoad:
+    """One load of the case on one tooth at given poses, arch frame.
+
+    force_cN (3,), applied at point_mm (3,), plus a couple couple_cNmm (3,). bodily: the load asks
+    for translation (a rectangular wire then moves the tooth without tipping)."""
+
+    force_cN: np.ndarray
+    point_mm: np.ndarray
+    couple_cNmm: np.ndarray
+    bodily: bool
+
+
+def applied_load(model: MovementModel, poses: Mapping[int, np.ndarray], load: Load, fdi: int,
+                 centers: Mapping[int, np.ndarray] | None = None) -> AppliedLoad:
+    """One load on one tooth at `poses` (centers: the crown centres at `poses`,
+    `Dentition.crown_centers`, when the caller has them)."""
     tooth = model.dentition.teeth[fdi]
     mech = model.mechanics[fdi]
     R, p = poses[fdi][:3, :3], poses[fdi][:3, 3]
@@ -251,15 +264,311 @@ def load_vectors(model: MovementModel, poses: Mapping[int, np.ndarray], load: Lo
     local = {"bracket": mech.bracket, "crown_center": mech.crown_center,
              "center_of_resistance": mech.center_of_resistance}.get(pt) if isinstance(pt, str) else np.asarray(pt, float)
     axis = {"mesiodistal": tooth.mesial, "labiolingual": tooth.labial, "long_axis": tooth.long_axis}[load.moment_axis]
-    return load.force_cN * u, R @ local + p, load.moment_cNmm * (R @ axis)
+    bodily = load.movement in ("translation", "extrusion", "intrusion") or (load.movement == "auto" and load.moment_cNmm == 0.0)
+    return AppliedLoad(load.force_cN * u, R @ local + p, load.moment_cNmm * (R @ axis), bodily)
 
 
 # ---------------------------------------------------------------------------------------------
-# one step
+# the state of a run between steps, and one step made of named phases
 
 
-def _crown_centers(model: MovementModel, poses: Mapping[int, np.ndarray]) -> dict[int, np.ndarray]:
-    return {n: model.dentition.teeth[n].to_world(model.dentition.teeth[n].crown_center, poses[n]) for n in model.present}
+@dataclass(frozen=True, eq=False)
+class StepState:
+    """What a run carries from one step to the next (the model never changes).
+
+    step / day: the step just made (0: the initial state) and its day.
+    poses: FDI -> (4, 4) local -> arch frame, mm. touching: pairs in contact at `poses`.
+    rest_depths: pair -> mm the exact meshes interpenetrate in the initial state (a scan may leave
+        some; the run's interpenetration is measured against it).
+    detector: the run's detector. queries: the run's exact queries and their memos (`ExactQueries`).
+    bite: pairs of facing teeth in contact in the initial state (the bite as the model stands): they
+        may slide by `occlusal_slide_mm`; contacts the run makes get the touch tolerance.
+    """
+
+    step: int
+    day: float
+    poses: Mapping[int, np.ndarray]
+    touching: tuple[tuple[int, int], ...]
+    rest_depths: Mapping[tuple[int, int], float]
+    detector: str
+    queries: ExactQueries
+    bite: frozenset[tuple[int, int]] = frozenset()
+
+    def slide_allowance(self, model: "MovementModel", pair: tuple[int, int]) -> float:
+        """mm a facing pair may sink below the rest state while its cusps slide along each other."""
+        s = model.settings
+        return s.occlusal_slide_mm if pair in self.bite else min(s.occlusal_slide_mm, s.touch_tolerance_mm)
+
+
+@dataclass(frozen=True, eq=False)
+class Forces:
+    """The forces phase: the loads on each tooth at the step's start and the force balance."""
+
+    loads: dict[int, list[AppliedLoad]]
+    balance: ForceBalance
+
+
+@dataclass(frozen=True, eq=False)
+class Hit:
+    """A collision the detection phase found: pair, time (fraction of the step), poses at contact."""
+
+    pair: tuple[int, int]
+    time: float
+    poses: Mapping[int, np.ndarray]
+
+
+@dataclass(frozen=True, eq=False)
+class Detection:
+    """The detection phase: the poses the step ends in, the collisions met, the pairs tested."""
+
+    poses: dict[int, np.ndarray]
+    hits: tuple[Hit, ...]
+    tested: frozenset[tuple[int, int]]
+
+
+def _touch_request(model: MovementModel) -> CollisionRequest:
+    return CollisionRequest(all_leaf_pairs=True, touch_tolerance_mm=model.settings.touch_tolerance_mm)
+
+
+def initial_state(model: MovementModel, detector: str, queries: ExactQueries | None = None) -> tuple[StepState, StepRecord]:
+    """The state before any movement (rest poses) and its record (step 0)."""
+    queries = queries or ExactQueries(model.collision)
+    P = {n: np.asarray(T, float).copy() for n, T in model.dentition.rest_poses().items()}
+    found = contacts(model.collision, P, _touch_request(model), queries, model.pairs, detector)
+    bite = frozenset(p for p in found.touching if p in model.facing)
+    state = StepState(0, 0.0, P, found.touching, found.penetration, detector, queries, bite)
+    return state, _record(model, state, frozenset(), found, (), None)
+
+
+def forces(model: MovementModel, state: StepState, centers: Mapping[int, np.ndarray]) -> Forces:
+    """Phase 1: the case's loads at the step's start poses, and the forces touching teeth pass on."""
+    s = model.settings
+    P = state.poses
+    loads: dict[int, list[AppliedLoad]] = {}
+    for load in model.case.loads:
+        for n in load.teeth:
+            if n in model.mechanics:
+                loads.setdefault(n, []).append(applied_load(model, P, load, n, centers))
+    applied = {n: sum((a.force_cN for a in v), np.zeros(3)) for n, v in loads.items()}
+    normals = [(a, b, _normal(model, (a, b), centers)) for a, b in state.touching]
+    balance = propagate(applied, normals, s.force_share,
+                        lambda n, f: n in model.mechanics and s.rate.moves(f, model.mechanics[n].root_area_mm2),
+                        _onward(model, P, state.touching, centers))
+    return Forces(loads, balance)
+
+
+def motions(model: MovementModel, state: StepState, f: Forces, centers: Mapping[int, np.ndarray]) -> dict[int, Motion]:
+    """Phase 2: each tooth's motion over the step under its free force; blocked teeth follow a
+    neighbour that gives way."""
+    s = model.settings
+    dt = float(model.case.step_days)
+    poses, balance = state.poses, f.balance
+    wire = model.case.wire.type
+    out: dict[int, Motion] = {}
+    for n in model.present:
+        free = balance.free.get(n, np.zeros(3))
+        own = f.loads.get(n, [])
+        couple = sum((a.couple_cNmm for a in own), np.zeros(3))
+        if not np.any(free) and not np.any(couple):
+            continue
+        if own and any(np.any(a.force_cN) for a in own):
+            w = np.array([np.linalg.norm(a.force_cN) for a in own])
+            point = sum(wi * a.point_mm for wi, a in zip(w, own)) / max(w.sum(), 1e-12)
+        else:
+            point = centers[n]
+        translation_only = wire == "rectangular" and (not own or any(a.bodily for a in own))
+        m = tooth_motion(model.mechanics[n], poses[n], free, point, couple, wire, translation_only, s.rate)
+        if not m.is_still:
+            out[n] = m
+    if wire != "rectangular":
+        return out
+    # a tooth blocked by a neighbour that moves away follows it, as far as its own push would take it
+    for _ in range(len(model.present)):
+        changed = False
+        for i, blockers in balance.blocked_by.items():
+            for j in blockers:
+                if j not in out:
+                    continue
+                n_ij = _normal(model, (i, j), centers)
+                p = 0.5 * (centers[i] + centers[j])
+                away = float(out[j].displacement(p, dt)[0] @ n_ij) / dt
+                mi = out.get(i, Motion.still(centers[i]))
+                cur = float(mi.displacement(p, dt)[0] @ n_ij) / dt
+                push = float(balance.total[i] @ n_ij)
+                want = float(s.rate.rate(np.linalg.norm(balance.total[i]), model.mechanics[i].root_area_mm2)) * push / max(
+                    np.linalg.norm(balance.total[i]), 1e-12)
+                target = min(away, want)
+                if target > cur + 1e-12:
+                    out[i] = Motion(mi.pivot, mi.velocity + (target - cur) * n_ij, mi.omega)
+                    changed = True
+        if not changed:
+            break
+    return out
+
+
+def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], centers: Mapping[int, np.ndarray]) -> Detection:
+    """Phase 3: the step's motions tested with the run's detector; the poses the step ends in.
+
+    Continuous: every mover is cut back to its earliest time of first contact, in rounds (cutting
+    one tooth may put it in another's way). Discrete detectors test the end poses; a tooth found
+    overlapping stops there. A pair in contact at the step's start is tested only when the move
+    takes the two into each other (`_approaching`, `_sinking`).
+    """
+    s = model.settings
+    dt = float(model.case.step_days)
+    P, queries = state.poses, state.queries
+    P1 = dict(P)
+    for n, m in moves.items():
+        P1[n] = m.apply(P[n], dt)
+    touching_set = set(state.touching)
+    hits: list[Hit] = []
+    tested_pairs: set = set()
+
+    def approaching(pair, current) -> bool:
+        if state.detector != "continuous":
+            return _approaching(model, pair, current, dt, centers)
+        end = {n: (P1[n] if n in current else P[n]) for n in pair}
+        return _sinking(model, state, pair, end)
+
+    def tested(current: dict[int, Motion], skip: set) -> list[tuple[int, int]]:
+        out = []
+        for pair in model.pairs:
+            a, b = pair
+            if pair in skip or (a not in current and b not in current):
+                continue
+            if pair in touching_set and not approaching(pair, current):
+                continue
+            out.append(pair)
+        return out
+
+    if state.detector == "continuous":
+        tcut = {n: 1.0 for n in moves}
+        done: set = set()
+        request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=True,
+                                   contact_tolerance_mm=s.contact_tolerance_mm)
+        for _ in range(s.rounds):
+            current = {n: m for n, m in moves.items() if tcut[n] > 0}
+            pairs = tested(_scaled(current, tcut), done)
+            tested_pairs.update(pairs)
+            if not pairs:
+                break
+            res = detect_step(model.collision, P, P1, pairs, "continuous", request, queries=queries)
+            found = [(tuple(map(int, pr)), float(t)) for pr, t in zip(res.pairs, res.time_of_first_contact) if not np.isnan(t)]
+            if not found:
+                break
+            for pair, t in found:
+                done.add(pair)
+                if pair in touching_set:
+                    continue  # a contact held from the last step stops the tooth; it is no new collision
+                P_at = dict(P1)
+                for n in pair:
+                    if n in tcut:
+                        P_at[n] = interpolate_pose(P[n], P1[n], t)
+                hits.append(Hit(pair, t * _frac(tcut, pair), P_at))
+            cut: dict[int, float] = {}
+            scaled = _scaled(moves, tcut)
+            for pair, t in found:
+                for n in _at_fault(model, pair, scaled, dt, centers):
+                    if n in tcut:
+                        cut[n] = min(cut.get(n, 1.0), t)
+            for n, t in cut.items():
+                P1[n] = interpolate_pose(P[n], P1[n], t)
+                tcut[n] *= t
+        # The sliding allowance was checked at the intended end of each move; a move cut short
+        # by another contact may stop mid-way over a cusp, deeper than its end would be: such a
+        # tooth keeps its start pose, so the bound holds on the poses a step leaves.
+        for pair in touching_set:
+            if pair in model.facing and any(P1[n] is not P[n] for n in pair) and \
+                    queries.penetration(pair, P1) - state.rest_depths.get(pair, 0.0) > state.slide_allowance(model, pair):
+                for n in pair:
+                    P1[n] = P[n]
+    else:
+        pairs = tested(moves, set())
+        tested_pairs.update(pairs)
+        if pairs:
+            res = detect_step(model.collision, P, P1, pairs, state.detector)
+            hits.extend(Hit(pair, 1.0, P1) for pair in res.touching_pairs() if pair not in touching_set)
+    return Detection(P1, tuple(hits), frozenset(tested_pairs))
+
+
+def _sinking(model: MovementModel, state: StepState, pair, end: Mapping[int, np.ndarray]) -> bool:
+    """Continuous detector: whether a pair touching at the step's start moves into each other.
+    Touching teeth that slide along each other can still sink in, so the exact meshes decide:
+    closer, or sinking deeper, at the end of the motion; teeth of the two arches may slide: only
+    sinking deeper than the pair's slide allowance below the rest state counts (so steps cannot add up)."""
+    s, q, P = model.settings, state.queries, state.poses
+    d0, d1 = q.distance(pair, P), q.distance(pair, end)
+    facing = pair in model.facing
+    if d1 > 0.0:
+        return not facing and d1 < d0 - 1e-6
+    if facing:
+        return q.penetration(pair, end) - state.rest_depths.get(pair, 0.0) > state.slide_allowance(model, pair)
+    start = q.penetration(pair, P) if d0 <= 0.0 else 0.0
+    deeper = q.penetration(pair, end) - start
+    return deeper > (1e-6 if d0 > 0.0 else s.contact_tolerance_mm)
+
+
+def contacts_at(model: MovementModel, state: StepState, poses: Mapping[int, np.ndarray]) -> Contacts:
+    """Phase 4: the contacts at the step's end poses with the run's detector (touching pairs, drawn
+    leaves, interpenetration)."""
+    return contacts(model.collision, poses, _touch_request(model), state.queries, model.pairs, state.detector)
+
+
+def response(model: MovementModel, state: StepState, moves: dict[int, Motion], detected: Detection, found: Contacts,
+             centers: Mapping[int, np.ndarray]) -> tuple[CollisionEvent, ...]:
+    """Phase 5: the step's collision events with their impact responses: each hit of the
+    detection, then each pair a moving tooth newly touches without a reported hit (it stopped
+    within the touching tolerance); teeth sliding over the other arch's (untested pairs) have not
+    collided. One event per pair and step."""
+    s = model.settings
+    dt = float(model.case.step_days)
+    events: list[CollisionEvent] = []
+    seen: set = set()
+    for h in detected.hits:
+        if h.pair not in seen:
+            seen.add(h.pair)
+            events.append(CollisionEvent(h.pair, h.time, _impact(model, h.pair, moves, h.poses, dt, centers, s.restitution)))
+    before = set(state.touching)
+    for pair in found.touching:
+        if pair not in before and pair not in seen and pair in detected.tested:
+            events.append(CollisionEvent(pair, 1.0, _impact(model, pair, moves, detected.poses, dt, centers, s.restitution)))
+    return tuple(events)
+
+
+def step(model: MovementModel, state: StepState) -> tuple[StepState, StepRecord]:
+    """One step of `case.step_days`: forces, motions, detection, contacts, response."""
+    centers = model.dentition.crown_centers(state.poses)
+    f = forces(model, state, centers)
+    moves = motions(model, state, f, centers)
+    detected = detection(model, state, moves, centers)
+    P = detected.poses
+    moved = frozenset(n for n in moves if not np.allclose(P[n], state.poses[n], atol=1e-12))
+    found = contacts_at(model, state, P)
+    events = response(model, state, moves, detected, found, centers)
+    k = state.step + 1
+    new = StepState(k, k * float(model.case.step_days), P, found.touching, state.rest_depths, state.detector, state.queries,
+                    state.bite)
+    return new, _record(model, new, moved, found, events, f.balance)
+
+
+def _record(model: MovementModel, state: StepState, moved: frozenset[int], found: Contacts,
+            events: tuple[CollisionEvent, ...], balance: ForceBalance | None) -> StepRecord:
+    depths = found.penetration
+    return StepRecord(
+        step=state.step,
+        time_days=state.day,
+        poses={n: T.copy() for n, T in state.poses.items()},
+        moving=moved,
+        touching=tuple(found.touching),
+        contact_centers=found.centers,
+        contact_radii=found.radii,
+        collisions=events,
+        forces=balance,
+        max_penetration_mm=max(0.0, _deepening(depths, state.rest_depths)) if state.step else 0.0,
+        distances=tuple(tooth_to_tooth_distances(model.dentition, state.poses, set(model.extracted))),
+        raw_penetration_mm=max(depths.values(), default=0.0),
+        penetrating=_deepest_first(depths),
+    )
 
 
 def _normal(model: MovementModel, pair: tuple[int, int], centers: Mapping[int, np.ndarray]) -> np.ndarray:
@@ -271,7 +580,7 @@ def _normal(model: MovementModel, pair: tuple[int, int], centers: Mapping[int, n
     return _horizontal(centers[b] - centers[a])
 
 
-def _onward(model: MovementModel, poses, touching, centers=None) -> dict[tuple[int, int], np.ndarray]:
+def _onward(model: MovementModel, poses, touching, centers) -> dict[tuple[int, int], np.ndarray]:
     """(pusher, pushed) -> direction of the force the pushed tooth receives: along the arch, toward
     its own next tooth away from the pusher (the paper's director vector); occlusal pairs: none
     (the contact normal, vertical, is used)."""
@@ -281,330 +590,75 @@ def _onward(model: MovementModel, poses, touching, centers=None) -> dict[tuple[i
             continue
         order = F.arch_order(F.arch_of(a), set(model.dentition.teeth))
         ia, ib = order.index(a), order.index(b)
-        for i, j, step in ((a, b, np.sign(ib - ia)), (b, a, np.sign(ia - ib))):
-            way = "mesial" if step == _arch_step(j, "mesial") else "distal"
+        for i, j, step_ in ((a, b, np.sign(ib - ia)), (b, a, np.sign(ia - ib))):
+            way = "mesial" if step_ == _arch_step(j, "mesial") else "distal"
             out[(i, j)] = arch_direction(model, poses, j, way, centers)
     return out
 
 
-def _motions(model: MovementModel, poses, balance: ForceBalance, loads_on: dict, dt: float, centers) -> dict[int, Motion]:
-    """Each tooth's motion over the step under its free force; blocked teeth follow a neighbour that gives way."""
-    s = model.settings
-    wire = model.case.wire.type
-    motions: dict[int, Motion] = {}
-    for n in model.present:
-        f = balance.free.get(n, np.zeros(3))
-        own = loads_on.get(n, [])
-        couple = sum((c for _, _, c, _ in own), np.zeros(3))
-        if not np.any(f) and not np.any(couple):
-            continue
-        if own and any(np.any(fv) for fv, _, _, _ in own):
-            w = np.array([np.linalg.norm(fv) for fv, _, _, _ in own])
-            point = sum(wi * pt for wi, (_, pt, _, _) in zip(w, own)) / max(w.sum(), 1e-12)
-        else:
-            point = centers[n]
-        translation_only = wire == "rectangular" and (not own or any(bodily for *_, bodily in own))
-        m = tooth_motion(model.mechanics[n], poses[n], f, point, couple, wire, translation_only, s.rate)
-        if not m.is_still:
-            motions[n] = m
-    if wire != "rectangular":
-        return motions
-    # a tooth blocked by a neighbour that moves away follows it, as far as its own push would take it
-    for _ in range(len(model.present)):
-        changed = False
-        for i, blockers in balance.blocked_by.items():
-            for j in blockers:
-                if j not in motions:
-                    continue
-                n_ij = _normal(model, (i, j), centers)
-                p = 0.5 * (centers[i] + centers[j])
-                away = float(motions[j].displacement(p, dt)[0] @ n_ij) / dt
-                mi = motions.get(i, Motion.still(centers[i]))
-                cur = float(mi.displacement(p, dt)[0] @ n_ij) / dt
-                push = float(balance.total[i] @ n_ij)
-                want = float(s.rate.rate(np.linalg.norm(balance.total[i]), model.mechanics[i].root_area_mm2)) * push / max(
-                    np.linalg.norm(balance.total[i]), 1e-12)
-                target = min(away, want)
-                if target > cur + 1e-12:
-                    motions[i] = Motion(mi.pivot, mi.velocity + (target - cur) * n_ij, mi.omega)
-                    changed = True
-        if not changed:
-            break
-    return motions
-
-
-def _approaching(model, pair, motions, dt, centers) -> bool:
+def _approaching(model, pair, moves, dt, centers) -> bool:
+    """Discrete detectors: whether the pair's crown centres come closer along the contact normal."""
     a, b = pair
     p = 0.5 * (centers[a] + centers[b])
     n = _normal(model, pair, centers)
-    da = motions[a].displacement(p, dt)[0] if a in motions else np.zeros(3)
-    db = motions[b].displacement(p, dt)[0] if b in motions else np.zeros(3)
+    da = moves[a].displacement(p, dt)[0] if a in moves else np.zeros(3)
+    db = moves[b].displacement(p, dt)[0] if b in moves else np.zeros(3)
     return float((da - db) @ n) > 1e-9
 
 
-def _at_fault(model, pair, motions, dt, centers) -> tuple[int, ...]:
+def _at_fault(model, pair, moves, dt, centers) -> tuple[int, ...]:
     """The teeth of a colliding pair whose own motion runs into the other (both when neither
     clearly does, e.g. a contact made by turning): those are the ones a contact stops."""
     a, b = pair
     p = 0.5 * (centers[a] + centers[b])
     n = _normal(model, pair, centers)
-    ga = float(motions[a].displacement(p, dt)[0] @ n) if a in motions else 0.0
-    gb = -float(motions[b].displacement(p, dt)[0] @ n) if b in motions else 0.0
+    ga = float(moves[a].displacement(p, dt)[0] @ n) if a in moves else 0.0
+    gb = -float(moves[b].displacement(p, dt)[0] @ n) if b in moves else 0.0
     out = tuple(t for t, g in ((a, ga), (b, gb)) if g > 1e-9)
     return out or pair
 
 
-def _depth(model: MovementModel, P, pair, known: dict) -> float:
-    """mm the pair's exact meshes interpenetrate at poses P (0 when apart), through the run's memo."""
-    a, b = pair
-    key = (pair, np.asarray(P[a]).tobytes(), np.asarray(P[b]).tobytes())
-    if key not in known:
-        if len(known) > 4096:
-            known.clear()
-        hit, _ = exact.collide(*_fcl_pair(model, P, pair))
-        ta, tb = model.dentition.teeth[a], model.dentition.teeth[b]
-        known[key] = exact.penetration_depth(ta.mesh, P[a], tb.mesh, P[b]) if hit else 0.0
-    return known[key]
-
-
-def _touching(model: MovementModel, detector: str, P: dict[int, np.ndarray], distances: exact.DistanceMemo | None = None):
-    """Pairs in contact at poses P with the detector's notion of contact, and the leaves to draw.
-
-    distances: the run's memo of exact distances: a pair neither of whose teeth has moved keeps its
-    exact distance without a new FCL query.
-    """
-    s = model.settings
-    pairs = list(model.pairs)
-    empty = (np.zeros((0, 3)), np.zeros(0))
-    if detector == "exact":
-        return [p for p in pairs if _exact_distance(model, P, p, distances) <= s.touch_tolerance_mm], empty
-    # circles: its contacts are the lenses of overlapping circles; the sphere-tree detectors: leaves
-    res = detect_step(model.collision, P, None, pairs, "circles" if detector == "circles" else "discrete",
-                      CollisionRequest(all_leaf_pairs=True))
-    touching = res.touching_pairs()
-    if detector == "continuous":
-        touching = [p for p in touching if _exact_distance(model, P, p, distances) <= s.touch_tolerance_mm]
-    keep = np.isin(res.pair_of_leaf, [i for i, p in enumerate(map(tuple, res.pairs.tolist())) if p in set(touching)])
-    if detector == "circles":  # one lens per pair, given for both teeth
-        return touching, (res.centers_a[keep], res.radii_a[keep])
-    centers = np.concatenate([res.centers_a[keep], res.centers_b[keep]])
-    radii = np.concatenate([res.radii_a[keep], res.radii_b[keep]])
-    return touching, (centers, radii)
-
-
-def _fcl_pair(model: MovementModel, P, pair):
-    ia, ib = model.collision.index[pair[0]], model.collision.index[pair[1]]
-    oa, ob = model.collision.fcl_object(ia), model.collision.fcl_object(ib)
-    exact.set_pose(oa, P[pair[0]])
-    exact.set_pose(ob, P[pair[1]])
-    return oa, ob
-
-
-def _exact_distance(model: MovementModel, P, pair, distances: exact.DistanceMemo | None = None) -> float:
-    """mm between the exact meshes of the pair at poses P; through the run's memo when given."""
-    if distances is None:
-        return exact.distance(*_fcl_pair(model, P, pair))
-    a, b = pair
-    return distances(model.collision.index[a], P[a], model.collision.index[b], P[b])
-
-
-def penetrations(model: MovementModel, P: Mapping[int, np.ndarray], known: dict | None = None) -> dict[tuple[int, int], float]:
-    """mm per intersecting candidate pair at poses P, on the exact meshes (FCL finds the
-    intersecting pairs, `exact.penetration_depth` measures how deep).
-
-    known: optional memo {(a, b): (pose a, pose b, depth)} of earlier steps, used and updated: a
-    pair neither of whose teeth has moved keeps its depth without a new measurement.
-    """
-    out = {}
-    for a, b in model.pairs:
-        if known is not None and (a, b) in known:
-            Ta, Tb, depth = known[(a, b)]
-            if np.array_equal(Ta, P[a]) and np.array_equal(Tb, P[b]):
-                if depth > 0:
-                    out[(a, b)] = depth
-                continue
-        hit, _ = exact.collide(*_fcl_pair(model, P, (a, b)))
-        depth = 0.0
-        if hit:
-            ta, tb = model.dentition.teeth[a], model.dentition.teeth[b]
-            depth = out[(a, b)] = exact.penetration_depth(ta.mesh, P[a], tb.mesh, P[b])
-        if known is not None:
-            known[(a, b)] = (P[a].copy(), P[b].copy(), depth)
-    return out
-
-
-def _deepening(depths: dict, initial: dict) -> float:
+def _deepening(depths: Mapping, initial: Mapping) -> float:
     """mm: the largest interpenetration the run has added to any pair (a model may start with some)."""
     return max((d - initial.get(p, 0.0) for p, d in depths.items()), default=0.0)
 
 
-def _deepest_first(depths: dict) -> tuple[tuple[tuple[int, int], float], ...]:
+def _deepest_first(depths: Mapping) -> tuple[tuple[tuple[int, int], float], ...]:
     return tuple(sorted(((tuple(map(int, p)), float(d)) for p, d in depths.items()), key=lambda item: -item[1]))
 
 
-def _impact(model: MovementModel, pair, motions, P_contact, dt, centers, restitution) -> dict:
+def _impact(model: MovementModel, pair, moves, P_contact, dt, centers, restitution) -> dict:
     bodies = []
     for n in pair:
         mech = model.mechanics[n]
         T = P_contact[n]
         com = T[:3, :3] @ mech.center_of_mass + T[:3, 3]
         inertia = T[:3, :3] @ mech.inertia_g_mm2 @ T[:3, :3].T
-        m = motions.get(n)
+        m = moves.get(n)
         v = m.displacement(com, dt)[0] / dt if m is not None else np.zeros(3)
         w = m.omega if m is not None else np.zeros(3)
         bodies.append(Body(mech.mass_g, com, inertia, v, w))
-    c = _crown_centers_of(model, P_contact, pair)
-    hit = impact(bodies[0], bodies[1], 0.5 * (c[0] + c[1]), _normal(model, pair, dict(zip(pair, c))), restitution)
+    c = model.dentition.crown_centers(P_contact)
+    hit = impact(bodies[0], bodies[1], 0.5 * (c[pair[0]] + c[pair[1]]), _normal(model, pair, c), restitution)
     return hit.summary()
 
 
-def _crown_centers_of(model, P, pair):
-    return [model.dentition.teeth[n].to_world(model.dentition.teeth[n].crown_center, P[n]) for n in pair]
-
-
-def simulate(model: MovementModel, detector: str | None = None, steps: int | None = None) -> Iterator[StepRecord]:
-    """Run the case of `model` with `detector` ('circles', 'discrete', 'continuous', 'exact'; the
-    case's by default) for `steps` steps of the case's step_days (the case's count by default).
-    Yields the initial state (step 0), then one StepRecord per step."""
+def simulate(model: MovementModel, detector: str | None = None, steps: int | None = None,
+             queries: ExactQueries | None = None) -> Iterator[StepRecord]:
+    """Run the case of `model` with `detector` (one of `orthosim.detectors.DETECTORS`; the case's by
+    default) for `steps` steps of the case's step_days (the case's count by default): the initial
+    record (step 0), then one per `step`. queries: the run's exact queries on `model.collision`
+    when the caller has prepared them (a fresh one otherwise)."""
     detector = detector or model.case.detector
-    if detector not in SIM_DETECTORS:
+    if detector not in DETECTORS:
         raise CaseError(model.case.path, "treatment.detector", f"unknown detector {detector!r}",
-                        f"use one of: {', '.join(SIM_DETECTORS)}")
-    s = model.settings
-    dt = float(model.case.step_days)
+                        f"use one of: {', '.join(DETECTORS)}")
     n_steps = model.case.steps if steps is None else int(steps)
-    P = {n: np.asarray(T, float).copy() for n, T in model.dentition.rest_poses().items()}
-    # exact distances asked for in the run, each asked of FCL once (a step asks for many twice)
-    distances = exact.DistanceMemo(model.collision.fcl_object)
-    touching, leaves = _touching(model, detector, P, distances)
-    dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
-    depth_memo: dict = {}
-    sink_memo: dict = {}  # (pair, pose bytes) -> mm: depths the sliding rule asks for
-    initial_depths = penetrations(model, P, depth_memo)
-    # the bite as the model stands (a scan's): its contacts slide by occlusal_slide_mm; contacts the
-    # treatment makes (an incisor retracted onto its antagonist) by the touch tolerance
-    bite = frozenset(p for p in touching if p in model.facing)
-    slide_of = lambda pair: s.occlusal_slide_mm if pair in bite else min(s.occlusal_slide_mm, s.touch_tolerance_mm)  # noqa: E731
-    yield StepRecord(0, 0.0, {n: T.copy() for n, T in P.items()}, frozenset(), tuple(touching), leaves[0], leaves[1],
-                     (), None, 0.0, dist, max(initial_depths.values(), default=0.0), _deepest_first(initial_depths))
-    for k in range(1, n_steps + 1):
-        centers = _crown_centers(model, P)
-        # 1. forces
-        loads_on: dict[int, list] = {}
-        for load in model.case.loads:
-            bodily = load.movement in ("translation", "extrusion", "intrusion") or (
-                load.movement == "auto" and load.moment_cNmm == 0.0)
-            for n in load.teeth:
-                if n in model.mechanics:
-                    loads_on.setdefault(n, []).append((*load_vectors(model, P, load, n, centers), bodily))
-        applied = {n: sum((f for f, *_ in v), np.zeros(3)) for n, v in loads_on.items()}
-        contacts = [(a, b, _normal(model, (a, b), centers)) for a, b in touching]
-        balance = propagate(applied, contacts, s.force_share,
-                            lambda n, f: n in model.mechanics and s.rate.moves(f, model.mechanics[n].root_area_mm2),
-                            _onward(model, P, touching, centers))
-        # 2. motions and intended end poses
-        motions = _motions(model, P, balance, loads_on, dt, centers)
-        P1 = dict(P)
-        for n, m in motions.items():
-            P1[n] = m.apply(P[n], dt)
-        # 3. collisions
-        touching_set = set(touching)
-        events: list[CollisionEvent] = []
-        tested_pairs: set = set()
-
-        def approaching(pair, current) -> bool:
-            # continuous: touching teeth that slide along each other can still sink in, so the
-            # exact meshes decide (closer, or sinking deeper, at the end of the motion; teeth of
-            # the two arches may slide: only sinking deeper than occlusal_slide_mm counts);
-            # discrete detectors only look at the end poses, and the crown centres decide
-            if detector != "continuous":
-                return _approaching(model, pair, current, dt, centers)
-            end = {n: (P1[n] if n in current else P[n]) for n in pair}
-            d0, d1 = _exact_distance(model, P, pair, distances), _exact_distance(model, end, pair, distances)
-            facing = pair in model.facing
-            if d1 > 0.0:
-                return not facing and d1 < d0 - 1e-6
-            if facing:  # sliding cusps: bounded against the rest state, so steps cannot add up
-                return _depth(model, end, pair, sink_memo) - initial_depths.get(pair, 0.0) > slide_of(pair)
-            start = _depth(model, P, pair, sink_memo) if d0 <= 0.0 else 0.0
-            deeper = _depth(model, end, pair, sink_memo) - start
-            return deeper > (1e-6 if d0 > 0.0 else s.contact_tolerance_mm)
-
-        def tested(current: dict[int, Motion], skip: set) -> list[tuple[int, int]]:
-            out = []
-            for pair in model.pairs:
-                a, b = pair
-                if pair in skip or (a not in current and b not in current):
-                    continue
-                if pair in touching_set and not approaching(pair, current):
-                    continue
-                out.append(pair)
-            return out
-
-        if detector == "continuous":
-            tcut = {n: 1.0 for n in motions}
-            done: set = set()
-            request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=True,
-                                       contact_tolerance_mm=s.contact_tolerance_mm)
-            for _ in range(s.rounds):
-                current = {n: m for n, m in motions.items() if tcut[n] > 0}
-                pairs = tested(_scaled(current, tcut), done)
-                tested_pairs.update(pairs)
-                if not pairs:
-                    break
-                res = detect_step(model.collision, P, P1, pairs, "continuous", request, distances=distances)
-                hits = [(tuple(map(int, pr)), float(t)) for pr, t in zip(res.pairs, res.time_of_first_contact) if not np.isnan(t)]
-                if not hits:
-                    break
-                for pair, t in hits:
-                    done.add(pair)
-                    if pair in touching_set:
-                        continue  # a contact held from the last step stops the tooth; it is no new collision
-                    P_at = dict(P1)
-                    for n in pair:
-                        if n in tcut:
-                            P_at[n] = interpolate_pose(P[n], P1[n], t)
-                    events.append(CollisionEvent(pair, t * _frac(tcut, pair), _impact(model, pair, motions, P_at, dt, centers, s.restitution)))
-                cut: dict[int, float] = {}
-                scaled = _scaled(motions, tcut)
-                for pair, t in hits:
-                    for n in _at_fault(model, pair, scaled, dt, centers):
-                        if n in tcut:
-                            cut[n] = min(cut.get(n, 1.0), t)
-                for n, t in cut.items():
-                    P1[n] = interpolate_pose(P[n], P1[n], t)
-                    tcut[n] *= t
-            # The sliding allowance was checked at the intended end of each move; a move cut short
-            # by another contact may stop mid-way over a cusp, deeper than its end would be: such a
-            # tooth keeps its start pose, so the bound holds on the poses a step leaves.
-            for pair in touching_set:
-                if pair in model.facing and any(P1[n] is not P[n] for n in pair) and \
-                        _depth(model, P1, pair, sink_memo) - initial_depths.get(pair, 0.0) > slide_of(pair):
-                    for n in pair:
-                        P1[n] = P[n]
-        else:
-            pairs = tested(motions, set())
-            tested_pairs.update(pairs)
-            if pairs:
-                res = detect_step(model.collision, P, P1, pairs, detector)
-                for pair in res.touching_pairs():
-                    if pair not in touching_set:
-                        events.append(CollisionEvent(pair, 1.0, _impact(model, pair, motions, P1, dt, centers, s.restitution)))
-        moved = frozenset(n for n in motions if not np.allclose(P1[n], P[n], atol=1e-12))
-        P = P1
-        # 4. contacts, interpenetration, distances
-        before = touching_set
-        touching, leaves = _touching(model, detector, P, distances)
-        # a moving tooth that made a new contact without a reported hit (it stopped within the
-        # touching tolerance) has collided too; teeth sliding over the other arch's have not
-        seen = {e.pair for e in events}
-        for pair in touching:
-            if pair not in before and pair not in seen and pair in tested_pairs:
-                events.append(CollisionEvent(pair, 1.0, _impact(model, pair, motions, P, dt, centers, s.restitution)))
-        dist = tuple(tooth_to_tooth_distances(model.dentition, P, set(model.extracted)))
-        yield StepRecord(k, k * dt, {n: T.copy() for n, T in P.items()}, moved, tuple(touching), leaves[0], leaves[1],
-                         tuple(events), balance, max(0.0, _deepening(depths := penetrations(model, P, depth_memo), initial_depths)), dist,
-                         max(depths.values(), default=0.0), _deepest_first(depths))
+    state, record = initial_state(model, detector, queries)
+    yield record
+    for _ in range(n_steps):
+        state, record = step(model, state)
+        yield record
 
 
 def simulate_case(case: Case, detector: str | None = None, steps: int | None = None,
@@ -619,9 +673,9 @@ def simulate_case(case: Case, detector: str | None = None, steps: int | None = N
     return simulate(MovementModel.build(case, dentition=dentition), detector, steps)
 
 
-def _scaled(motions: dict[int, Motion], tcut: dict[int, float]) -> dict[int, Motion]:
+def _scaled(moves: dict[int, Motion], tcut: dict[int, float]) -> dict[int, Motion]:
     """Motions shortened to the fraction of the step each tooth still makes (for the approach test)."""
-    return {n: Motion(m.pivot, m.velocity * tcut[n], m.omega * tcut[n]) for n, m in motions.items()}
+    return {n: Motion(m.pivot, m.velocity * tcut[n], m.omega * tcut[n]) for n, m in moves.items()}
 
 
 def _frac(tcut: dict[int, float], pair) -> float:

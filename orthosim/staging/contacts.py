@@ -23,11 +23,11 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..collision import exact
 from ..collision.broadphase import sweep_and_prune
 from ..collision.continuous import swept_leaves_posed
 from ..collision.model import CollisionModel
 from ..collision.motion import PosePath, chord_deviation_bound, relative_speed_bound, rotation_angle
+from ..collision.queries import ExactQueries
 
 TOLERANCE_MM = 0.002  # resolution of the exact check (see the module docstring)
 
@@ -57,7 +57,7 @@ class StageChecker:
         for (a, b), (sa, sb) in (shifts or {}).items():
             self.shifts[(a, b)] = (np.asarray(sa, float), np.asarray(sb, float))
             self.shifts[(b, a)] = (np.asarray(sb, float), np.asarray(sa, float))
-        self.distances = exact.DistanceMemo(model.fcl_object, size=8192)
+        self.queries = ExactQueries(model, memo_size=8192)
         self.fcl_queries = 0
 
     def pose_array(self, poses: Mapping[int, np.ndarray]) -> np.ndarray:
@@ -122,18 +122,15 @@ class StageChecker:
         contact means intersecting meshes, and strides never shrink below the check's resolution.
         """
         m = self.model
-        oa, ob = m.fcl_object(i), m.fcl_object(j)
         path_a, path_b = PosePath(Ta0, Ta1), PosePath(Tb0, Tb1)
         mu = relative_speed_bound(Ta0, Ta1, m.rho_max[i], Tb0, Tb1, m.rho_max[j])
         t = t_start
         while True:
             pa, pb = path_a.at(t), path_b.at(t)
-            exact.set_pose(oa, pa)
-            exact.set_pose(ob, pb)
             self.fcl_queries += 1
-            if exact.collide(oa, ob)[0]:
+            if self.queries.body_intersects(i, pa, j, pb):
                 return t
             if t >= 1.0 or mu <= 0.0:
                 return None
-            d = self.distances(i, pa, j, pb)
+            d = self.queries.body_distance(i, pa, j, pb)
             t = min(1.0, t + max(d, self.tolerance_mm) / mu)

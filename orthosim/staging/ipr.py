@@ -21,8 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..collision import exact
+from ..collision.queries import ExactQueries
 from ..errors import OrthosimError
+from ..geometry import meshquery
 
 RESOLUTION_MM = 1e-3  # bisection resolution of the reduction
 CLEARANCE_MM = 0.01  # extra room left between the reduced surfaces, above the contact check's resolution
@@ -53,9 +54,9 @@ def penetration_along(obj_a, pose_a: np.ndarray, obj_b, pose_b: np.ndarray, dire
     def apart(d: float) -> bool:
         T = np.array(pose_b, float)
         T[:3, 3] += d * direction
-        exact.set_pose(obj_a, pose_a)
-        exact.set_pose(obj_b, T)
-        return not exact.collide(obj_a, obj_b)[0]
+        meshquery.set_pose(obj_a, pose_a)
+        meshquery.set_pose(obj_b, T)
+        return not meshquery.collide(obj_a, obj_b)[0]
 
     if apart(0.0):
         return 0.0
@@ -73,12 +74,15 @@ def penetration_along(obj_a, pose_a: np.ndarray, obj_b, pose_b: np.ndarray, dire
     return hi
 
 
-def reduction_for(model, dentition, a: int, b: int, pose_a: np.ndarray, pose_b: np.ndarray, source=None) -> InterproximalReduction:
-    """The IPR that lets neighbours a and b (FDI) stand at the given target poses."""
+def reduction_for(model, dentition, a: int, b: int, pose_a: np.ndarray, pose_b: np.ndarray, source=None,
+                  queries: ExactQueries | None = None) -> InterproximalReduction:
+    """The IPR that lets neighbours a and b (FDI) stand at the given target poses (queries: the
+    caller's `ExactQueries` of `model`, whose FCL objects it re-poses; one is made when None)."""
     ca = dentition.teeth[a].to_world(dentition.teeth[a].crown_center, pose_a)
     cb = dentition.teeth[b].to_world(dentition.teeth[b].crown_center, pose_b)
     u = (cb - ca) / np.linalg.norm(cb - ca)
-    amount = penetration_along(model.fcl_object(model.index[a]), pose_a, model.fcl_object(model.index[b]), pose_b, u)
+    queries = queries or ExactQueries(model)
+    amount = penetration_along(queries.object(model.index[a]), pose_a, queries.object(model.index[b]), pose_b, u)
     if amount > MAX_IPR_MM:
         raise StagingError(source, f"target of teeth {a} and {b}",
                            f"the two teeth overlap by more than {MAX_IPR_MM:g} mm at the target: no reduction can make room",

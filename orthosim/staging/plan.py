@@ -214,7 +214,7 @@ def _reductions(dentition, model, checker, targets, teeth, source) -> list[Inter
             where = "of opposing arches" if F.arch_of(c.a) is not F.arch_of(c.b) else "that are not neighbours"
             raise StagingError(source, f"target of teeth {c.a} and {c.b}", f"the teeth intersect at the target ({where})",
                                "change the target so these teeth do not meet there")
-        out.append(reduction_for(model, dentition, c.a, c.b, targets[c.a], targets[c.b], source))
+        out.append(reduction_for(model, dentition, c.a, c.b, targets[c.a], targets[c.b], source, checker.queries))
     return out
 
 

@@ -17,14 +17,13 @@ import numpy as np
 
 from orthosim.case import load_case
 from orthosim.contacttable import ContactParts, PairContact, StepContacts, contact_table
+from orthosim.detectors import DETECTORS as DETECTOR_ORDER
 from orthosim.distancemap import DistanceMapModel, ToothDistances
 from orthosim.errors import OrthosimError
 from orthosim.occlusion import bolton_ratios
 from orthosim.spaceanalysis import ArchSpace, arch_space, widths_mm
 
 from .runs import RunData
-
-DETECTOR_ORDER = ("circles", "discrete", "continuous", "exact")
 
 
 class ReportInputError(OrthosimError):

@@ -1,15 +1,14 @@
-"""The exact mesh reference: python-fcl on the teeth's triangle meshes.
+"""Exact queries on triangle meshes: python-fcl BVH objects, their poses, intersection and distance.
 
-Ground truth for the sphere-tree detectors in tests and in the accuracy report, and the detector
-for users who want true distances (`--detector exact`); never called by the sphere-tree hot loop.
+Geometry only, with no detector behind it: the dental model places parametric teeth with it
+(`MeshQuery`), and collision detection answers a run's exact questions through it
+(`orthosim.collision.queries.ExactQueries`, which owns one FCL object per tooth and its pose).
 FCL tests surfaces only: a mesh wholly inside another is reported as not colliding.
 """
 
 from __future__ import annotations
 
 import weakref
-from collections import OrderedDict
-from typing import Callable
 
 import fcl
 import numpy as np
@@ -125,40 +124,3 @@ class MeshQuery:
     def distance(self, a: int, pose_a: np.ndarray, b: int, pose_b: np.ndarray) -> float:
         """mm between the surfaces; 0.0 when they intersect."""
         return distance(self._placed(a, pose_a), self._placed(b, pose_b))
-
-
-class DistanceMemo:
-    """Exact distances (mm, `distance`) between bodies at given poses, each one asked of FCL once.
-
-        distances = DistanceMemo(collision_model.fcl_object)   # one per run: it is state, not model
-        d = distances(i_a, pose_a, i_b, pose_b)
-
-    Why: a simulation step asks for the same distance several times (a touching pair before and
-    after its motion, again in each detection round, again when a time of contact is refined from
-    t = 0 and when the step's contacts are listed); two thirds of its FCL distance queries were
-    repeats. A distance is a function of the two meshes and the two poses alone, so the answer is
-    kept under the bodies and the poses' exact bytes (a pose one ulp off is a new query) and is the
-    very number FCL gave. The `size` least recently used answers are kept.
-    """
-
-    def __init__(self, objects: Callable[[int], fcl.CollisionObject], size: int = 4096):
-        self._objects = objects
-        self._size = size
-        self._known: OrderedDict[tuple, float] = OrderedDict()
-        self.queries = 0  # how many were asked of FCL (the rest were remembered)
-
-    def __call__(self, i_a: int, pose_a: np.ndarray, i_b: int, pose_b: np.ndarray) -> float:
-        key = (i_a, i_b, np.ascontiguousarray(pose_a, dtype=float).tobytes(),
-               np.ascontiguousarray(pose_b, dtype=float).tobytes())
-        d = self._known.get(key)
-        if d is not None:
-            self._known.move_to_end(key)
-            return d
-        oa, ob = self._objects(i_a), self._objects(i_b)
-        set_pose(oa, pose_a)
-        set_pose(ob, pose_b)
-        d = self._known[key] = distance(oa, ob)
-        self.queries += 1
-        if len(self._known) > self._size:
-            self._known.popitem(last=False)
-        return d
