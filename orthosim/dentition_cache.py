@@ -33,7 +33,7 @@ from .atomic import atomic_path
 BUILDER_VERSION = 1
 # Modules whose code decides what a built dentition holds: their source is part of the key.
 _BUILDER_MODULES = ("anatomy", "archform", "dentition", "fdi", "interpenetration", "meshload", "meshrefine", "occlusion",
-                    "openfulljaw", "parametric", "scanframe", "tooth", "toothshape", "geometry/meshquery")
+                    "openfulljaw", "parametric", "scanfolders", "scanframe", "tooth", "toothshape", "geometry/meshquery")
 _PACKAGE = Path(__file__).resolve().parent
 
 

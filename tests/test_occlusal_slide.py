@@ -14,10 +14,18 @@ import pytest
 from orthosim.case import Load, load_case
 from orthosim.dentition import Dentition
 from orthosim.interpenetration import SLIDE_MAX_MM, SLIDE_MIN_MM, default_occlusal_slide_mm
+from orthosim.collision import ExactQueries
 from orthosim.movement import MovementModel, simulate
-from orthosim.movement.simulation import _exact_distance, penetrations
 
 CASES = Path(__file__).resolve().parent.parent / "cases"
+
+
+def penetrations(model, poses) -> dict:
+    return ExactQueries(model.collision).penetrations(model.pairs, poses)
+
+
+def _exact_distance(model, poses, pair) -> float:
+    return ExactQueries(model.collision).distance(pair, poses)
 
 
 @lru_cache(maxsize=1)
