@@ -54,8 +54,8 @@ def test_real_case3_the_opened_diastema_closes_in_both_arches():
     model, m, last = _run("open_full_jaw_case3_diastema.toml")
     gap = {tuple(d["pair"]): (d["initial_mm"], d["final_mm"]) for d in m["distances"]}
     # the space was opened: the incisors start 2 mm further apart than in the scan (0.2-0.4 mm)
-    assert _exact_distance(model, model.dentition.rest_poses(), (11, 21)) > 2.0
-    assert _exact_distance(model, model.dentition.rest_poses(), (41, 31)) > 2.0
+    assert ExactQueries(model.collision).distance((11, 21), model.dentition.rest_poses()) > 2.0
+    assert ExactQueries(model.collision).distance((41, 31), model.dentition.rest_poses()) > 2.0
     for pair in ((11, 21), (41, 31)):
         before, after = gap[pair]
         assert after < before - 0.5, (pair, before, after)
