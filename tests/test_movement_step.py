@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from collision_helpers import median_split_tree
-from orthosim.case import load_case
+from movement_helpers import coarse_case
 from orthosim.collision import CollisionModel
 from orthosim.movement import MovementModel, simulate
 from orthosim.movement.biomechanics import Motion
@@ -25,23 +25,8 @@ def built():
 
 
 def _model(built, tmp_path, load, extractions=(14, 24, 34, 44), detector="continuous"):
-    p = tmp_path / "case.toml"
-    p.write_text(f"""
-[model]
-kind = "parametric"
-resolution = "coarse"
-[treatment]
-extractions = {list(extractions)}
-duration_days = 56
-step_days = 7
-detector = "{detector}"
-[wire]
-type = "rectangular"
-[[loads]]
-{load}
-""")
     dent, cm = built
-    return MovementModel.build(load_case(p), dent, cm)
+    return MovementModel.build(coarse_case(tmp_path, extractions, load, detector=detector), dent, cm)
 
 
 MESIAL_15 = 'teeth = [15]\nforce_cN = 150\ndirection = "mesial"\nmovement = "translation"'

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from collision_helpers import median_split_tree
-from orthosim.case import load_case
+from movement_helpers import coarse_case
 from orthosim.collision import CollisionModel, ExactQueries
 from orthosim.errors import CaseError
 from orthosim.movement import MovementModel, simulate
@@ -22,21 +22,7 @@ def built():
 
 
 def _case(tmp_path, extractions, load, wire="rectangular", days=56, step=7):
-    p = tmp_path / "case.toml"
-    p.write_text(f"""
-[model]
-kind = "parametric"
-resolution = "coarse"
-[treatment]
-extractions = {list(extractions)}
-duration_days = {days}
-step_days = {step}
-[wire]
-type = "{wire}"
-[[loads]]
-{load}
-""")
-    return load_case(p)
+    return coarse_case(tmp_path, extractions, load, wire, days, step)
 
 
 def _run(built, case, detector="continuous"):
