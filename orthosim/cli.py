@@ -15,7 +15,7 @@ from pathlib import Path
 import click
 
 from . import __version__
-from .detectors import DETECTORS
+from .detectors import DETECTORS, PAPER_DETECTORS
 from .errors import OrthosimError
 from .run import MIN_ANIMATION_S, RunOptions
 
@@ -348,7 +348,7 @@ def report(inputs: tuple[Path, ...], out_dir: Path, detectors: tuple[str, ...], 
             load_case(path)  # every case file checked before any run starts
         run_dirs = []
         for path in inputs:
-            for det in detectors or ("circles", "discrete", "continuous"):
+            for det in detectors or PAPER_DETECTORS:
                 run_dir = out_dir / "runs" / path.stem / det
                 opts = {"no_render": not render_runs, "size": size, "views": ("frontal",), "frames_per_step": 1}
                 run_case(path, run_dir, det, opts)

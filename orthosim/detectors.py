@@ -5,3 +5,4 @@ from here (a module with no imports, so that parsing a case or building the CLI 
 """
 
 DETECTORS = ("circles", "discrete", "continuous", "exact")
+PAPER_DETECTORS = DETECTORS[:3]  # the paper's three (a report's default), without the exact reference

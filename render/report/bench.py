@@ -17,11 +17,11 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from orthosim.case import CASES_DIR
+from orthosim.detectors import PAPER_DETECTORS as DETECTORS
 from orthosim.runfolder import RunFolderError, file_sha256, read_finished_run
 
 PAPER_CASES = ("case1_first_premolar_extraction.toml", "case2_second_premolar_extraction.toml",
                "case3_incisor_space_closure.toml")
-DETECTORS = ("circles", "discrete", "continuous")
 TARGET_S = 30.0
 
 
