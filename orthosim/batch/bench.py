@@ -32,7 +32,7 @@ from pathlib import Path
 
 from .execute import BatchOptions, prebuild_trees, run_batch
 from .plan import parse_sweep, plan_batch
-from .worker import RunCase
+from .worker import ONE_CORE, RunCase
 
 TARGET_RATIO = 1.8
 RUNS = 24
@@ -61,8 +61,7 @@ def batch_throughput(run_case: RunCase, case: str | Path, *, runs: int = RUNS, d
     else:  # a case without loads: the runs differ in their (otherwise unused) restitution
         sweeps.append(parse_sweep("simulation.restitution=" + ",".join(f"{0.01 * (i + 1):g}" for i in range(runs))))
     variants = plan_batch([case], sweeps=sweeps)
-    render_opts = {"size": tuple(size), "frames_per_step": frames_per_step, "views": ("frontal",),
-                   "simulate_in_process": True}
+    render_opts = {"size": tuple(size), "frames_per_step": frames_per_step, "views": ("frontal",), **ONE_CORE}
     cores = os.cpu_count() or 1
     record: dict = {"case": str(case), "runs": len(variants), "steps_per_run": variants[0].steps,
                     "frames_per_run": variants[0].steps * frames_per_step + 1, "size": list(size),
