@@ -268,3 +268,6 @@ def test_the_bench_figure_runs_the_same_runs_on_a_cold_pool_of_one_and_of_two_wo
         assert record[f"detail_{name}"]["workers_cpu_s_per_run"] > 0  # the workers' start-up at least
     assert record["ratio_2_to_1"] == pytest.approx(record["per_minute_2_workers"] / record["per_minute_1_worker"])
     assert record["meets_target"] == (record["ratio_2_to_1"] >= record["target_ratio_2_to_1"])
+    # two workers can never do more than twice the work of one, however idle one leaves the cores
+    assert record["ratio_ceiling"] == pytest.approx(min(2.0, record["cores"] / one["cores_busy"]))
+    assert record["ratio_ceiling"] <= 2.0

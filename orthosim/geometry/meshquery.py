@@ -19,7 +19,9 @@ import trimesh
 
 # BVHs kept per process, by mesh content, for the next object of the same mesh (least recently
 # used dropped beyond this many): a batch worker runs model after model, mostly the same teeth.
-BVH_MEMO_SIZE = 64
+# One full dentition: a run holds its teeth's BVHs anyway (about 570 bytes a triangle, 9-26 MB
+# for a 16,000-45,000-triangle real tooth), so the memo adds little to a run's peak memory.
+BVH_MEMO_SIZE = 32
 _BVHS: OrderedDict[tuple, fcl.BVHModel] = OrderedDict()
 _BVHS_LOCK = threading.Lock()
 bvh_builds = 0  # BVHs built by this process (the rest came from the memo)
