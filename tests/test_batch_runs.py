@@ -167,6 +167,9 @@ def test_the_command_exits_1_when_a_run_fails_and_0_when_all_succeed(case_file, 
     done = subprocess.run(args, capture_output=True, text=True, env=env, timeout=600)
     assert done.returncode == 0, done.stderr
     assert "batch: 1 runs, 1 ok, 0 failed" in done.stdout
+    run_id = json.loads((tmp_path / "batch.json").read_text())["runs"][0]["run_id"]
+    options = read_finished_run(tmp_path / run_id)["options"]
+    assert options["single_core"] and options["simulate_in_process"]  # the command asks each run for one core
 
 
 def test_a_batch_killed_mid_run_resumes_without_redoing_finished_runs(case_file, tmp_path):
