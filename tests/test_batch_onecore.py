@@ -168,3 +168,37 @@ def test_the_second_run_of_a_model_builds_no_bvh_and_gives_the_same_metrics(case
                            str(fresh), "--no-render", "-q"], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     assert stable_metrics(tmp_path / "second") == stable_metrics(fresh)
+
+
+def test_a_one_core_render_writes_the_pipelined_files_and_a_failed_one_leaves_none(tmp_path):
+    from orthosim.errors import OrthosimError
+    from render.animation import render_run
+    from render.bench import SyntheticMotion
+    from render.frame_state import FrameState
+    from render.standin import standin_dentition
+
+    dentition = standin_dentition()
+    motion = SyntheticMotion(dentition, n_markers=50)
+    states = [motion(i) for i in range(4)]
+    kw = dict(views=("frontal", "maxillary"), size=(80, 60), gif=True, split_views=True, progress=False)
+    render_run(dentition, states, tmp_path / "pipelined", **kw)
+    render_run(dentition, iter(states), tmp_path / "one_core", single_core=True, **kw)
+    files = sorted(p.relative_to(tmp_path / "pipelined") for p in (tmp_path / "pipelined").rglob("*") if p.is_file())
+    assert len([f for f in files if f.suffix == ".png"]) == 12  # 4 tiled frames, 4 per view
+    assert files == sorted(p.relative_to(tmp_path / "one_core") for p in (tmp_path / "one_core").rglob("*") if p.is_file())
+    for f in files:
+        a, b = tmp_path / "pipelined" / f, tmp_path / "one_core" / f
+        if f.suffix == ".mp4":
+            assert decoded_video(a) == decoded_video(b)
+        else:
+            assert a.read_bytes() == b.read_bytes(), f
+
+    def failing():
+        yield FrameState.rest(dentition)
+        yield FrameState.rest(dentition)
+        raise OrthosimError("case.toml", "loads", "cannot continue")
+
+    with pytest.raises(OrthosimError):
+        render_run(dentition, failing(), tmp_path / "failed", single_core=True, size=(80, 60), progress=False)
+    assert not (tmp_path / "failed" / "animation.mp4").exists()
+    assert not [p for p in (tmp_path / "failed").rglob(".*")]  # no temporary file either
