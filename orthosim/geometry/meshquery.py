@@ -32,9 +32,10 @@ def fcl_object(mesh: trimesh.Trimesh) -> fcl.CollisionObject:
 
     Each call gives an object of its own (its pose is its state), around a BVH shared with every
     other object of a mesh with the same vertices and faces (bit for bit): building it is most of
-    a run's set-up. Sharing is safe in python-fcl: the geometry is never changed after `endModel`,
-    an object keeps a reference to its Python geometry and frees only its own C++ object, and the
-    C++ BVH is freed by the Python geometry alone, once no object or memo entry holds it."""
+    a run's set-up. Sharing is safe in python-fcl: after `endModel` nothing changes the geometry
+    but the local bounding box each new object computes (to the same values), an object keeps a
+    reference to its Python geometry and frees only its own C++ object, and the C++ BVH is freed
+    by the Python geometry alone, once no object or memo entry holds it."""
     return fcl.CollisionObject(bvh(mesh), fcl.Transform())
 
 
