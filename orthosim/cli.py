@@ -366,7 +366,7 @@ def run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: 
     """One run as `orthosim run` does it, also what each `orthosim batch` worker calls (a
     module-level function, so it pickles by name to worker processes and Dask workers).
     render_opts: the `run` command's options by name (any left out take their defaults), plus
-    `simulate_in_process` (batch workers). Returns the run's metrics and run record, merged."""
+    `simulate_in_process` and `single_core` (batch workers, `RunOptions`). Returns the run's metrics and run record, merged."""
     import json
 
     started = time.perf_counter()
@@ -397,6 +397,7 @@ def run_options(detector: str | None, opts: dict) -> RunOptions:
                       frames_per_step=get("frames_per_step"), seconds=get("seconds"), fps=get("fps", d.fps),
                       split_views=get("split_views", d.split_views), export_scene=get("export_scene"),
                       export_steps=get("export_steps"), simulate_in_process=get("simulate_in_process", False),
+                      single_core=get("single_core", False),
                       verbosity=0 if get("quiet") else 2 if get("verbose") else 1)
 
 
@@ -438,7 +439,7 @@ def _render_steps(dent, records, out_dir: Path, options: RunOptions, *, extracte
     return render_run(dent, frames, out_dir, views=options.views, size=options.size, gif=options.gif, alpha=options.alpha,
                       hide_roots=options.hide_roots, color_contact_faces=options.contact_faces, fps=options.fps,
                       split_views=options.split_views, total=total, progress=progress,
-                      exact_contact_faces=options.contact_faces_exact, caption=caption)
+                      exact_contact_faces=options.contact_faces_exact, caption=caption, single_core=options.single_core)
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:

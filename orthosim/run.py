@@ -69,6 +69,7 @@ class RunOptions:
     export_scene: str | None = None
     export_steps: tuple[int, ...] | None = None
     simulate_in_process: bool = False  # batch workers: one per core already, so no simulation child per run
+    single_core: bool = False  # batch workers: also simulate, draw and encode on one thread, ffmpeg on one (implies simulate_in_process)
     verbosity: int = 1
 
 
@@ -318,7 +319,7 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
                 pass
             dent = None
         else:
-            if options.simulate_in_process:
+            if options.simulate_in_process or options.single_core:
                 dent = case.build_dentition()
                 split, where = _Split(simulation_stream(case, options.detector, out_dir, dentition=dent), log, keep), "in this process"
             else:

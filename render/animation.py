@@ -12,7 +12,8 @@ images to a `FrameSink`, which encodes on background threads while the next fram
   - split views (optional): besides the tiled frame, each view's image as
     `frames/<view>/NNNNN.png`.
 The queues between the renderer and the encoders are bounded: a slow disk slows the run down
-instead of filling memory.
+instead of filling memory. `render_run(single_core=True)` (a batch worker, one per core) does all
+of it on the calling thread instead: no frame-taking or encoder threads, ffmpeg on one thread.
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ from .png import encode_png
 VIDEO_FPS = 30
 GIF_MAX_FRAMES = 240
 _END = object()
+# ffmpeg's encoder (libx264, and its lookahead) and its filters (the RGB -> YUV conversion) on one thread each
+_ONE_THREAD_FFMPEG = ["-threads", "1", "-filter_threads", "1"]
 _umask = os.umask(0)
 os.umask(_umask)
 _FILE_MODE = 0o666 & ~_umask
@@ -91,19 +94,41 @@ class _Worker(threading.Thread):
             raise self.error
 
 
+class _Inline:
+    """A `_Worker` that runs `handle(item)` on the caller's thread, at once."""
+
+    def __init__(self, handle):
+        self.handle = handle
+
+    def put(self, item):
+        self.handle(item)
+
+    def finish(self):
+        pass
+
+
 class FrameSink:
-    """Writes frames as PNG files and/or an MP4 (and a GIF), encoding on background threads."""
+    """Writes frames as PNG files and/or an MP4 (and a GIF), encoding on background threads.
+
+    inline: encode on the caller's thread instead (no encoder threads) and have ffmpeg encode on
+    one thread: a run that must keep to one core (a batch worker, one per core)."""
 
     def __init__(self, out_dir: str | Path, *, png: bool = True, mp4: bool = True, gif: bool = False,
-                 video_fps: int = VIDEO_FPS, png_threads: int = 2, split_views: Sequence[str] = ()):
+                 video_fps: int = VIDEO_FPS, png_threads: int = 2, split_views: Sequence[str] = (),
+                 inline: bool = False):
         self.out_dir = Path(out_dir)
         self.frames_dir = self.out_dir / "frames"
         self.png, self.mp4, self.gif = png, mp4, gif
         self.video_fps = video_fps
+        self.inline = inline
         self.count = 0
         self._stack = contextlib.ExitStack()
-        self._png_workers = ([_Worker(f"png-{i}", self._write_png) for i in range(png_threads)]
-                             if png or split_views else [])
+        if not (png or split_views):
+            self._png_workers = []
+        elif inline:
+            self._png_workers = [_Inline(self._write_png)]
+        else:
+            self._png_workers = [_Worker(f"png-{i}", self._write_png) for i in range(png_threads)]
         self._video_worker = None
         self._video_size = None
         self._gif_frames: list = []
@@ -138,7 +163,7 @@ class FrameSink:
             # quiet: ffmpeg's own lines would break the one-line error a failed write ends in (a full
             # disk shows as the writer's OSError, which orthosim.outputfolder turns into that line)
             codec="libx264", macro_block_size=1, ffmpeg_log_level="quiet",
-            output_params=["-preset", "ultrafast", "-crf", "20"],
+            output_params=["-preset", "ultrafast", "-crf", "20"] + (_ONE_THREAD_FFMPEG if self.inline else []),
         )
         writer.send(None)  # start ffmpeg
         self._video_writer = writer
@@ -146,7 +171,7 @@ class FrameSink:
         def handle(frame):
             writer.send(frame)
 
-        self._video_worker = _Worker("mp4", handle)
+        self._video_worker = _Inline(handle) if self.inline else _Worker("mp4", handle)
 
     def _keep_for_gif(self, image: np.ndarray):
         if self.count % self._gif_stride:
@@ -311,10 +336,11 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
                size: tuple[int, int] = (640, 480), gif: bool = False, alpha: bool = False, progress: bool = True,
                hide_roots: bool = False, color_contact_faces: bool = False, png: bool = True, mp4: bool = True,
                fps: int = VIDEO_FPS, split_views: bool = False, total: int | None = None,
-               exact_contact_faces: bool = False, caption=None, on_frame: Callable | None = None) -> dict:
+               exact_contact_faces: bool = False, caption=None, on_frame: Callable | None = None,
+               single_core: bool = False) -> dict:
     """Render every state in `frames` into out_dir (frames/NNNNN.png, animation.mp4, animation.gif).
 
-    `frames` is taken ahead on a thread (`prefetch`); `orthosim run` feeds it the records of a
+    `frames` is taken ahead on a thread (`prefetch`, unless single_core); `orthosim run` feeds it the records of a
     simulation running in a child process (`orthosim.background`), so that simulating the next
     steps and drawing this one use both cores instead of taking turns for one GIL.
 
@@ -325,6 +351,10 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
     detector, day N of M, the colour legend and, if it asks for them, FDI labels.
     on_frame(state, scene): called once each frame is handed to the encoders (`orthosim bench`
     times this very loop frame by frame through it).
+    single_core: keep the run on the calling thread: `frames` taken as they come (no prefetch
+    thread), frames encoded inline (no encoder threads), ffmpeg on one thread. For a process that
+    has one core to itself and shares the machine with others doing the same (`orthosim batch`
+    workers); a run alone wants the pipeline, which keeps more than one core busy.
 
     Returns {"frames": n, "fps": end-to-end frames per second (render, read back, encode, write),
     "render_fps": ..., "views": [...], "size": [w, h], "encode_s": time to flush the encoders, ...}.
@@ -339,7 +369,8 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
         total = len(frames) if hasattr(frames, "__len__") else None
     scene = DentitionScene(dentition, size, hide_roots=hide_roots, color_contact_faces=color_contact_faces,
                            exact_contact_faces=exact_contact_faces)
-    sink = FrameSink(out_dir, png=png, mp4=mp4, gif=gif, video_fps=fps, split_views=views if split_views else ())
+    sink = FrameSink(out_dir, png=png, mp4=mp4, gif=gif, video_fps=fps, split_views=views if split_views else (),
+                     inline=single_core)
     bar = _Progress(progress, total)
     overlay = None
     if caption is not None:
@@ -352,7 +383,7 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
         with Renderer(size, alpha=alpha) as renderer, _interrupt_between_frames() as interrupted:
             started = time.perf_counter()
             previous = images = frame = None
-            for state in prefetch(frames):
+            for state in (frames if single_core else prefetch(frames)):
                 if state is not previous:
                     t0 = time.perf_counter()
                     scene.update(state)

@@ -9,6 +9,8 @@ import signal
 import time
 from pathlib import Path
 
+from orthosim.batch.worker import ONE_CORE
+
 SMALL_CASE = """\
 [case]
 name = "small"
@@ -29,7 +31,7 @@ force_cN = 150
 direction = "mesial"
 """
 
-RENDER = {"size": (48, 32), "frames_per_step": 1, "views": ("frontal",), "simulate_in_process": True}
+RENDER = {"size": (48, 32), "frames_per_step": 1, "views": ("frontal",), **ONE_CORE}
 
 
 def _real(case_path, out_dir, detector, opts):
@@ -87,3 +89,16 @@ def instant(case_path, out_dir, detector, opts):
     the batch's own machinery: its table, its pool)."""
     return {"steps": 1, "collisions": 0, "max_penetration_mm": 0.0,
             "total_distance_mm": {"initial": 1.0, "final": 0.5}, "frames": 0, "wall_s": 0.0}
+
+
+def with_threads(case_path, out_dir, detector, opts):
+    """A real run that then lists its worker process's threads (threads.json): Python's, and the
+    operating system's by name (llvmpipe's raster threads are named llvmpipe-N)."""
+    import json
+    import threading
+
+    summary = _real(case_path, out_dir, detector, opts)
+    native = sorted(Path(task, "comm").read_text().strip() for task in Path("/proc/self/task").iterdir())
+    Path(out_dir, "threads.json").write_text(json.dumps({"python": [t.name for t in threading.enumerate()],
+                                                          "native": native}))
+    return summary

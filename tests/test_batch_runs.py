@@ -167,6 +167,9 @@ def test_the_command_exits_1_when_a_run_fails_and_0_when_all_succeed(case_file, 
     done = subprocess.run(args, capture_output=True, text=True, env=env, timeout=600)
     assert done.returncode == 0, done.stderr
     assert "batch: 1 runs, 1 ok, 0 failed" in done.stdout
+    run_id = json.loads((tmp_path / "batch.json").read_text())["runs"][0]["run_id"]
+    options = read_finished_run(tmp_path / run_id)["options"]
+    assert options["single_core"] and options["simulate_in_process"]  # the command asks each run for one core
 
 
 def test_a_batch_killed_mid_run_resumes_without_redoing_finished_runs(case_file, tmp_path):
@@ -268,3 +271,6 @@ def test_the_bench_figure_runs_the_same_runs_on_a_cold_pool_of_one_and_of_two_wo
         assert record[f"detail_{name}"]["workers_cpu_s_per_run"] > 0  # the workers' start-up at least
     assert record["ratio_2_to_1"] == pytest.approx(record["per_minute_2_workers"] / record["per_minute_1_worker"])
     assert record["meets_target"] == (record["ratio_2_to_1"] >= record["target_ratio_2_to_1"])
+    # two workers can never do more than twice the work of one, however idle one leaves the cores
+    assert record["ratio_ceiling"] == pytest.approx(min(2.0, record["cores"] / one["cores_busy"]))
+    assert record["ratio_ceiling"] <= 2.0

@@ -17,6 +17,7 @@ from ..cli import check_render_options, render_options, run_case
 from ..detectors import DETECTORS
 from .execute import BatchOptions, counts, run_batch
 from .plan import parse_sweep, plan_batch
+from .worker import ONE_CORE
 
 
 @click.command()
@@ -37,7 +38,8 @@ from .plan import parse_sweep, plan_batch
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Run on a Dask distributed scheduler (tcp://HOST:PORT) instead of local workers; needs orthosim[cluster].")
 @click.option("--simulation", type=click.Choice(["in-worker", "child"]), default="in-worker", show_default=True,
-              help="Simulate on a thread of each worker, or in a child process per run as `orthosim run` does.")
+              help="Simulate in each worker, on the one thread that draws and encodes (one core per worker), or "
+                   "in a child process per run as `orthosim run` does.")
 @click.option("--dry-run", is_flag=True, help="Validate and list the runs; run nothing.")
 @render_options
 def batch(cases, out_dir: Path, detectors, sweeps, workers, run_timeout, retries, scheduler, simulation, dry_run,
@@ -56,7 +58,8 @@ def batch(cases, out_dir: Path, detectors, sweeps, workers, run_timeout, retries
             click.echo(f"{v.run_id}\t{v.source}\t{v.label}\t{v.steps} steps")
         click.echo(f"{len(variants)} runs, all valid")
         return
-    render_opts["simulate_in_process"] = simulation == "in-worker"
+    if simulation == "in-worker":
+        render_opts.update(ONE_CORE)
     options = BatchOptions(workers=workers or os.cpu_count() or 1, run_timeout_s=run_timeout, retries=retries,
                            scheduler=scheduler, render_opts=render_opts)
     rows = run_batch(variants, out_dir, run_case, options, keys)

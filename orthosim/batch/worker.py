@@ -38,6 +38,12 @@ WORKER_ENV = {
     "PYOPENGL_PLATFORM": "osmesa",
 }
 
+# What a local worker asks of each run (`run_case`'s render_opts, `orthosim.run.RunOptions`): one
+# core, as WORKER_ENV holds each library to one thread: the simulation in this process rather than
+# a child, and simulation, drawing and encoding on one thread (no prefetch or encoder threads,
+# ffmpeg on one thread). `orthosim run` alone keeps its pipeline, which keeps more than a core busy.
+ONE_CORE = {"simulate_in_process": True, "single_core": True}
+
 RunCase = Callable[[Path, Path, str, dict], dict]
 
 

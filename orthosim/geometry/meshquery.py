@@ -8,20 +8,65 @@ FCL tests surfaces only: a mesh wholly inside another is reported as not collidi
 
 from __future__ import annotations
 
+import hashlib
+import threading
 import weakref
+from collections import OrderedDict
 
 import fcl
 import numpy as np
 import trimesh
 
+# BVHs kept per process, by mesh content, for the next object of the same mesh (least recently
+# used dropped beyond this many): a batch worker runs model after model, mostly the same teeth.
+# One full dentition: a run holds its teeth's BVHs anyway (about 570 bytes a triangle, 9-26 MB
+# for a 16,000-45,000-triangle real tooth), so the memo adds little to a run's peak memory.
+BVH_MEMO_SIZE = 32
+_BVHS: OrderedDict[tuple, fcl.BVHModel] = OrderedDict()
+_BVHS_LOCK = threading.Lock()
+bvh_builds = 0  # BVHs built by this process (the rest came from the memo)
+
 
 def fcl_object(mesh: trimesh.Trimesh) -> fcl.CollisionObject:
-    """A python-fcl BVH (OBB-RSS) collision object of a mesh in its local frame (mm)."""
-    g = fcl.BVHModel()
-    g.beginModel(len(mesh.vertices), len(mesh.faces))
-    g.addSubModel(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int32))
-    g.endModel()
-    return fcl.CollisionObject(g, fcl.Transform())
+    """A python-fcl BVH (OBB-RSS) collision object of a mesh in its local frame (mm).
+
+    Each call gives an object of its own (its pose is its state), around a BVH shared with every
+    other object of a mesh with the same vertices and faces (bit for bit): building it is most of
+    a run's set-up. Sharing is safe in python-fcl: after `endModel` nothing changes the geometry
+    but the local bounding box each new object computes (to the same values), an object keeps a
+    reference to its Python geometry and frees only its own C++ object, and the C++ BVH is freed
+    by the Python geometry alone, once no object or memo entry holds it."""
+    return fcl.CollisionObject(bvh(mesh), fcl.Transform())
+
+
+def bvh(mesh: trimesh.Trimesh) -> fcl.BVHModel:
+    """The mesh's python-fcl BVH (OBB-RSS), from this process's memo when one of the same content was built."""
+    global bvh_builds
+    vertices = np.ascontiguousarray(mesh.vertices, dtype=float)
+    faces = np.ascontiguousarray(mesh.faces, dtype=np.int32)
+    digest = hashlib.blake2b(vertices.tobytes(), digest_size=20)
+    digest.update(faces.tobytes())
+    key = (vertices.shape, faces.shape, digest.digest())
+    with _BVHS_LOCK:
+        g = _BVHS.get(key)
+        if g is not None:
+            _BVHS.move_to_end(key)
+            return g
+        g = fcl.BVHModel()
+        g.beginModel(len(vertices), len(faces))
+        g.addSubModel(vertices, faces)
+        g.endModel()
+        bvh_builds += 1
+        _BVHS[key] = g
+        while len(_BVHS) > BVH_MEMO_SIZE:
+            _BVHS.popitem(last=False)
+        return g
+
+
+def forget_bvhs() -> None:
+    """Empty this process's BVH memo (objects made already keep theirs)."""
+    with _BVHS_LOCK:
+        _BVHS.clear()
 
 
 def set_pose(obj: fcl.CollisionObject, T: np.ndarray) -> None:
