@@ -88,15 +88,26 @@ class PosePath:
     """One tooth's motion over a step, T0 -> T1 (4, 4), asked for its pose at many times.
 
     `at(t)` is `interpolate_pose(T0, T1, t)`, the same arithmetic, with the rotation vector found
-    once instead of at every call (conservative advancement asks for a pose per stride).
+    once, at the first time after 0 asked for, instead of at every call (conservative advancement
+    asks for a pose per stride, and often only for t = 0, where the pose is T0 itself: the
+    arithmetic multiplies T0 by an identity and adds zeros).
     """
 
     def __init__(self, T0: np.ndarray, T1: np.ndarray):
         self.T0 = np.asarray(T0, float)
         self.T1 = np.asarray(T1, float)
-        self.w = rotation_vector(self.T0, self.T1)
+        self._w: np.ndarray | None = None
+
+    @property
+    def w(self) -> np.ndarray:
+        """(3,) the step's rotation vector (radians)."""
+        if self._w is None:
+            self._w = rotation_vector(self.T0, self.T1)
+        return self._w
 
     def at(self, t: float | np.ndarray) -> np.ndarray:
+        if np.ndim(t) == 0 and t == 0.0:
+            return self.T0.copy()
         return _pose_at(self.T0, self.T1, self.w, t)
 
 

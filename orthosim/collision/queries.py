@@ -27,6 +27,7 @@ Units: mm; poses local -> arch frame.
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 from typing import Iterable, Mapping
 
@@ -78,7 +79,7 @@ class ExactQueries:
         self.collides = 0  # intersection tests asked of FCL (the rest were remembered or proved apart)
         self.patch_reach_mm = patch_reach_mm
         self._patches: dict[tuple[int, int], _Patch] = {}
-        self._edges: dict[int, float] = {}
+        self._faces: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._trees: dict[int, object] = {}
 
     # ------------------------------------------------------------------ by FDI pair and poses
@@ -129,10 +130,11 @@ class ExactQueries:
             self.object(self.model.index[int(k)])
 
     def body_intersects(self, i: int, pose_i: np.ndarray, j: int, pose_j: np.ndarray) -> bool:
-        if self.proved_apart(i, pose_i, j, pose_j):
+        M = _relative(pose_i, pose_j)
+        if self._apart(i, j, M):
             return False
         self.collides += 1
-        patch = self._patch(i, pose_i, j, pose_j, build=False)
+        patch = self._patch(i, pose_i, j, pose_j, M, build=False)
         if patch is not None:
             return patch.empty is False and meshquery.collide(*patch.placed(pose_i, pose_j))[0]
         return meshquery.collide(self.placed(i, pose_i), self.placed(j, pose_j))[0]
@@ -143,11 +145,12 @@ class ExactQueries:
         if d is not None:
             self._distances.move_to_end(key)
             return d
-        apart = self.proved_apart(i, pose_i, j, pose_j)
+        M = _relative(pose_i, pose_j)
+        apart = self._apart(i, j, M)
         if not apart:
             self.collides += 1
         d = None
-        patch = self._patch(i, pose_i, j, pose_j, build=True)
+        patch = self._patch(i, pose_i, j, pose_j, M, build=True)
         if patch is not None and not patch.empty:
             d = meshquery.distance(*patch.placed(pose_i, pose_j), apart=apart)
             if d + patch.shift > self.patch_reach_mm:
@@ -156,28 +159,33 @@ class ExactQueries:
             d = meshquery.distance(self.placed(i, pose_i), self.placed(j, pose_j), apart=apart)
         self._remember(self._distances, key, d)
         if d > APART_MARGIN_MM:
-            self._last_apart[(i, j)] = (_relative(pose_i, pose_j), d)
+            self._last_apart[(i, j)] = (M, d)
         self.queries += 1
         return d
 
     def proved_apart(self, i: int, pose_i: np.ndarray, j: int, pose_j: np.ndarray) -> bool:
         """Whether the pair's last exact distance, less how far body i can have moved relative to
         body j since, leaves the meshes more than `APART_MARGIN_MM` apart at these poses."""
+        return self._apart(i, j, _relative(pose_i, pose_j))
+
+    def _apart(self, i: int, j: int, M: np.ndarray) -> bool:
+        """`proved_apart` given body i's pose in body j's frame (3, 4)."""
         last = self._last_apart.get((i, j))
         if last is None:
             return False
         M0, d0 = last
-        return bool(d0 - self._shift(i, M0, _relative(pose_i, pose_j)) > APART_MARGIN_MM)
+        return bool(d0 - self._shift(i, M0, M) > APART_MARGIN_MM)
 
     def _shift(self, i: int, M0: np.ndarray, M: np.ndarray) -> float:
         """mm: how far any vertex of body i can lie between relative poses M0 and M (3, 4)."""
-        return float(np.linalg.norm(M[:, :3] - M0[:, :3]) * self.model.rho_max[i] + np.linalg.norm(M[:, 3] - M0[:, 3]))
+        dR, dt = (M[:, :3] - M0[:, :3]).ravel(), M[:, 3] - M0[:, 3]
+        return math.sqrt(dR @ dR) * float(self.model.rho_max[i]) + math.sqrt(dt @ dt)
 
-    def _patch(self, i: int, pose_i: np.ndarray, j: int, pose_j: np.ndarray, build: bool) -> "_Patch | None":
+    def _patch(self, i: int, pose_i: np.ndarray, j: int, pose_j: np.ndarray, M: np.ndarray, build: bool) -> "_Patch | None":
         """The pair's patches with `shift` set for these poses: kept while the teeth have moved
         relative to each other by at most half the reach since they were cut, cut afresh (build)
-        otherwise; None when there are none and build is False."""
-        M, N = _relative(pose_i, pose_j), _relative(pose_j, pose_i)
+        otherwise; None when there are none and build is False. M: body i's pose in body j's frame."""
+        N = _relative(pose_j, pose_i)
         patch = self._patches.get((i, j))
         if patch is not None:
             patch.shift = max(self._shift(i, patch.rel_ij, M), self._shift(j, patch.rel_ji, N))
@@ -192,33 +200,40 @@ class ExactQueries:
         """The faces of bodies i and j that lie within the reach of the other at relative poses M
         (i in j's frame) and N (j in i's frame).
 
-        A point of a triangle lies within the triangle's longest edge of one of its corners, so a
-        face within the reach of the other mesh has a corner within reach + both meshes' longest
-        edges of one of the other's vertices: every face with such a corner is kept."""
-        bi, bj = self.model.bodies[i], self.model.bodies[j]
-        radius = self.patch_reach_mm + self._longest_edge(i) + self._longest_edge(j)
-        keep = []
-        for body, other, R in ((bi, j, M), (bj, i, N)):
-            v = np.asarray(body.mesh.vertices, float) @ R[:, :3].T + R[:, 3]  # in the other's frame
-            near = np.isfinite(self._vertex_tree(other).query(v, distance_upper_bound=radius)[0])
-            keep.append(np.flatnonzero(near[np.asarray(body.mesh.faces)].any(axis=1)))
-        if not len(keep[0]) or not len(keep[1]):
+        Every point of a triangle lies within its corner radius (the farthest corner from its
+        centroid) of the centroid, so a face within the reach of a face of the other mesh has its
+        centroid within reach + its own corner radius + the other mesh's largest corner radius of
+        that face's centroid: every face whose centroid is that close to one of the other's is kept."""
+        faces = []
+        for a, b, R in ((i, j, M), (j, i, N)):
+            centroids, radii = self._face_spheres(a)
+            reach = self.patch_reach_mm + radii + self._face_spheres(b)[1].max()
+            gap = self._centroid_tree(b).query(centroids @ R[:, :3].T + R[:, 3], distance_upper_bound=float(reach.max()))[0]
+            kept = np.flatnonzero(gap <= reach)
+            faces.append(kept[np.argsort(gap[kept], kind="stable")])  # nearest first: FCL's distance starts from faces 0
+        if not len(faces[0]) or not len(faces[1]):
             return _Patch(M, N, None, None)
-        objects = [meshquery.fcl_object(trimesh.Trimesh(b.mesh.vertices, np.asarray(b.mesh.faces)[f], process=False))
-                   for b, f in ((bi, keep[0]), (bj, keep[1]))]
+        meshes = (self.model.bodies[i].mesh, self.model.bodies[j].mesh)
+        objects = [meshquery.fcl_object(trimesh.Trimesh(m.vertices, np.asarray(m.faces)[f], process=False))
+                   for m, f in zip(meshes, faces)]
         return _Patch(M, N, *objects)
 
-    def _longest_edge(self, i: int) -> float:
-        if i not in self._edges:
-            self._edges[i] = float(self.model.bodies[i].mesh.edges_unique_length.max())
-        return self._edges[i]
+    def _face_spheres(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """Body i's face centroids (f, 3) and corner radii (f,), mm, local frame."""
+        known = self._faces.get(i)
+        if known is None:
+            corners = np.asarray(self.model.bodies[i].mesh.triangles, float)  # (f, 3, 3)
+            centroids = corners.mean(axis=1)
+            radii = np.linalg.norm(corners - centroids[:, None, :], axis=2).max(axis=1)
+            known = self._faces[i] = (centroids, radii * (1 + 1e-9) + 1e-9)  # outward rounding
+        return known
 
-    def _vertex_tree(self, i: int):
+    def _centroid_tree(self, i: int):
         tree = self._trees.get(i)
         if tree is None:
             from scipy.spatial import cKDTree
 
-            tree = self._trees[i] = cKDTree(np.asarray(self.model.bodies[i].mesh.vertices, float))
+            tree = self._trees[i] = cKDTree(self._face_spheres(i)[0])
         return tree
 
     def body_penetration(self, i: int, pose_i: np.ndarray, j: int, pose_j: np.ndarray) -> float:
