@@ -44,15 +44,17 @@ PATCH_REACH_MM = 0.5  # a pair's patches hold every face within this of the othe
 class _Patch:
     """The faces of two teeth near each other, cut at one relative pose, as two FCL objects.
 
-    rel_ij / rel_ji: (3, 4) pose of i in j's frame and of j in i's, when cut. obj_i / obj_j: FCL
+    rel_ij / rel_ji: (3, 4) pose of i in j's frame and of j in i's, when cut. faces_i / faces_j: the
+    kept faces' indices, nearest the other tooth first. obj_i / obj_j: FCL
     objects of the kept faces (the whole vertex arrays, so triangle for triangle FCL computes the
     very numbers it computes on the whole meshes), None when either side kept none (`empty`).
     shift: mm, how far either tooth's vertices have moved relative to the other since the cut, at
     the poses last asked about.
     """
 
-    def __init__(self, rel_ij, rel_ji, obj_i, obj_j):
+    def __init__(self, rel_ij, rel_ji, faces_i, faces_j, obj_i=None, obj_j=None):
         self.rel_ij, self.rel_ji, self.obj_i, self.obj_j = rel_ij, rel_ji, obj_i, obj_j
+        self.faces_i, self.faces_j = faces_i, faces_j
         self.shift = 0.0
 
     @property
@@ -212,11 +214,11 @@ class ExactQueries:
             kept = np.flatnonzero(gap <= reach)
             faces.append(kept[np.argsort(gap[kept], kind="stable")])  # nearest first: FCL's distance starts from faces 0
         if not len(faces[0]) or not len(faces[1]):
-            return _Patch(M, N, None, None)
+            return _Patch(M, N, *faces)
         meshes = (self.model.bodies[i].mesh, self.model.bodies[j].mesh)
         objects = [meshquery.fcl_object(trimesh.Trimesh(m.vertices, np.asarray(m.faces)[f], process=False))
                    for m, f in zip(meshes, faces)]
-        return _Patch(M, N, *objects)
+        return _Patch(M, N, *faces, *objects)
 
     def _face_spheres(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """Body i's face centroids (f, 3) and corner radii (f,), mm, local frame."""
