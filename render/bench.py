@@ -49,6 +49,7 @@ import numpy as np
 from orthosim.case import DEFAULT_CASE  # the paper's case 1, as the demo: ~1,100-1,400 contact spheres a step
 from orthosim.spheretree.bench import tree_build_timings
 
+from .cputime import cpu_ms_per_frame, cpu_snapshot
 from .frame_state import FrameState
 
 TARGET_FPS = 40  # the paper's figure, with a graphics card
@@ -294,9 +295,12 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         update, render, read back, the overlay when `caption` is given (a `render.overlay.FrameCaption`),
         encode on the sink's threads. Timed through its `on_frame` callback."""
         stamps, markers, drawn, moving = [], [], [], []
+        cpu: dict = {}
 
         def on_frame(st, sc):
             stamps.append(time.perf_counter())
+            if len(stamps) in (warm, warm + frames):  # CPU of every thread and child over the measured frames
+                cpu[len(stamps)] = cpu_snapshot()
             markers.append(st.n_contacts)
             drawn.append(len(sc.markers.positions) if st.n_contacts else 0)
             moving.append(len(st.moving))
@@ -322,7 +326,11 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
                                                      "max": int(max(drawn[measured]))},
                 # share of the measured frames in which some tooth moved: a case that has come to
                 # rest draws (cheaply) the same teeth again, so read the fps with this beside it
-                "frames_with_moving_teeth": float(np.mean([m > 0 for m in moving[measured]]))}
+                "frames_with_moving_teeth": float(np.mean([m > 0 for m in moving[measured]])),
+                # informative: where the CPU goes (ms per frame by thread group and child process);
+                # the total over the machine's cores bounds the frame rate end to end can reach
+                "cpu_ms_per_frame": cpu_ms_per_frame(cpu.get(warm), cpu.get(warm + frames), frames),
+                "cores": os.cpu_count()}
 
     encode = ["MP4 encode (libx264 ultrafast)"] + (["PNG frames (render.png)"] if png else [])
     e2e_synthetic = end_to_end(synthetic(i) for i in range(n_states))
