@@ -176,6 +176,42 @@ def _render_variants(dentition, states, size, frames_per_round: int, rounds: int
 
 
 
+def _step_against_detector(movement_model, detector: str, n_states: int, warmup: int) -> dict:
+    """Informative, beside fps.simulation and collision_us_per_step (measured minutes apart, so a
+    change of the machine's load between them moves their ratio): the same simulation steps again,
+    each followed by one whole-arch continuous detector step (the collision bench's: rest poses to
+    `perturbed_poses`, every candidate pair, all leaf pairs), medians of both and their ratio."""
+    from orthosim.collision import CollisionRequest, detect_step
+    from orthosim.collision.bench import perturbed_poses
+    from orthosim.collision.detect import default_pairs
+    from orthosim.movement.simulation import simulate as simulate_steps
+
+    model = movement_model.collision
+    rest = movement_model.dentition.rest_poses()
+    end = perturbed_poses(rest)
+    pairs = default_pairs(model)
+    request = CollisionRequest(all_leaf_pairs=True)
+
+    def detector_step():
+        detect_step(model, rest, end, pairs=pairs, detector="continuous", request=request)
+
+    detector_step()
+    steps, sweeps = [], []
+    gen = simulate_steps(movement_model, detector, steps=n_states)
+    for i in range(n_states):
+        t0 = time.perf_counter()
+        next(gen)
+        t1 = time.perf_counter()
+        detector_step()
+        if i >= warmup:
+            steps.append(t1 - t0)
+            sweeps.append(time.perf_counter() - t1)
+    gen.close()
+    step_us, sweep_us = 1e6 * float(np.median(steps)), 1e6 * float(np.median(sweeps))
+    return {"simulation_step_us": step_us, "continuous_step_us": sweep_us, "ratio": step_us / sweep_us,
+            "target_ratio": 3.0}
+
+
 def _overlay_figures(end_to_end, in_child_process, simulate_case, case_obj, detector, n_states, dentition,
                      extracted, e2e_off, rounds: int = 3) -> dict:
     """end_to_end with the frame overlay drawn (caption, day counter, legend; then with FDI labels
@@ -339,6 +375,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     # ---- the real thing: movement + continuous detection per step
     pending: dict[str, str] = {}
     fps_sim = None
+    sim_vs_detector = None
     e2e_sim = None
     e2e_interp = None
     e2e_thread = None
@@ -358,6 +395,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
                 sim_times.append(time.perf_counter() - t0)
         gen.close()
         fps_sim = _median_fps(sim_times)
+        sim_vs_detector = _step_against_detector(movement_model, detector, n_states, warmup)
         # the pipeline of `orthosim run`: the simulation in a child process (orthosim.background),
         # running ahead of the drawing through a bounded queue, so that it does not take turns
         # with the drawing and encoding for this process's GIL
@@ -454,6 +492,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         "end_to_end_simulation_on_thread": e2e_thread,
         "end_to_end_overlay": e2e_overlay,
         "collision_us_per_step": None if collision is None else collision.get("collision_us_per_step"),
+        "simulation_step_against_continuous_interleaved": sim_vs_detector,
         "collision_fps": None if collision is None else {
             k: (1e6 / v if v else None) for k, v in collision.get("collision_us_per_step", {}).items()},
         "collision": collision,
