@@ -131,24 +131,28 @@ def chord_deviation_bound(theta: np.ndarray, rho: np.ndarray) -> np.ndarray:
     return np.asarray(rho, float) * np.minimum(theta * theta / 8.0, 2.0)
 
 
-def max_speed(T0: np.ndarray, T1: np.ndarray, rho_max: float) -> float:
-    """mm per unit step time: bound on the speed of any point within rho_max of the local origin."""
-    theta = float(rotation_angle(T0, T1))
+def max_speed(T0: np.ndarray, T1: np.ndarray, rho_max: float, angle: float | None = None) -> float:
+    """mm per unit step time: bound on the speed of any point within rho_max of the local origin
+    (angle: `rotation_angle(T0, T1)` when the caller has it)."""
+    theta = float(rotation_angle(T0, T1)) if angle is None else float(angle)
     return float(np.linalg.norm(np.asarray(T1)[:3, 3] - np.asarray(T0)[:3, 3]) + theta * rho_max)
 
 
 def relative_speed_bound(T0a: np.ndarray, T1a: np.ndarray, rho_a: float,
-                         T0b: np.ndarray, T1b: np.ndarray, rho_b: float) -> float:
+                         T0b: np.ndarray, T1b: np.ndarray, rho_b: float,
+                         angles: tuple[float, float] | None = None) -> float:
     """mm per unit step time: bound on how fast the distance between two moving bodies can shrink.
 
     A point of body a moves at v_a + w_a x r (v_a its origin's constant velocity, |w_a| = theta_a,
     |r| <= rho_a), likewise for b, so any two points approach at most at
     |v_a - v_b| + theta_a rho_a + theta_b rho_b. Unlike the sum of the two bodies' own speeds, this
     is near zero for teeth translating together, so conservative advancement takes full strides
-    instead of crawling.
+    instead of crawling. angles: (theta_a, theta_b), `rotation_angle` of the two motions, when the
+    caller has them.
     """
     dv = (np.asarray(T1a)[:3, 3] - np.asarray(T0a)[:3, 3]) - (np.asarray(T1b)[:3, 3] - np.asarray(T0b)[:3, 3])
-    return float(np.linalg.norm(dv) + rotation_angle(T0a, T1a) * rho_a + rotation_angle(T0b, T1b) * rho_b)
+    theta_a, theta_b = angles if angles is not None else (rotation_angle(T0a, T1a), rotation_angle(T0b, T1b))
+    return float(np.linalg.norm(dv) + theta_a * rho_a + theta_b * rho_b)
 
 
 def interpolate_poses(T0: np.ndarray, T1: np.ndarray, t: np.ndarray) -> np.ndarray:
