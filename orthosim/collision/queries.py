@@ -46,8 +46,9 @@ class _Patch:
 
     rel_ij / rel_ji: (3, 4) pose of i in j's frame and of j in i's, when cut. faces_i / faces_j: the
     kept faces' indices, nearest the other tooth first. obj_i / obj_j: FCL
-    objects of the kept faces (the whole vertex arrays, so triangle for triangle FCL computes the
-    very numbers it computes on the whole meshes), None when either side kept none (`empty`).
+    objects of the kept faces (each triangle with its corners' own coordinates, so triangle for
+    triangle FCL computes the very numbers it computes on the whole meshes), None when either side
+    kept none (`empty`).
     shift: mm, how far either tooth's vertices have moved relative to the other since the cut, at
     the poses last asked about.
     """
@@ -215,9 +216,7 @@ class ExactQueries:
             faces.append(kept[np.argsort(gap[kept], kind="stable")])  # nearest first: FCL's distance starts from faces 0
         if not len(faces[0]) or not len(faces[1]):
             return _Patch(M, N, *faces)
-        meshes = (self.model.bodies[i].mesh, self.model.bodies[j].mesh)
-        objects = [meshquery.fcl_object(trimesh.Trimesh(m.vertices, np.asarray(m.faces)[f], process=False))
-                   for m, f in zip(meshes, faces)]
+        objects = [meshquery.fcl_object(_submesh(self.model.bodies[k].mesh, f)) for k, f in ((i, faces[0]), (j, faces[1]))]
         return _Patch(M, N, *faces, *objects)
 
     def _face_spheres(self, i: int) -> tuple[np.ndarray, np.ndarray]:
@@ -262,6 +261,13 @@ class ExactQueries:
         if len(memo) > self._memo_size:
             memo.popitem(last=False)
         return value
+
+
+def _submesh(mesh: trimesh.Trimesh, faces: np.ndarray) -> trimesh.Trimesh:
+    """The given faces of `mesh`, in that order, over only the vertices they use (each triangle
+    keeps its corners' coordinates and order, so FCL computes the same numbers on it)."""
+    used, corners = np.unique(np.asarray(mesh.faces)[faces], return_inverse=True)
+    return trimesh.Trimesh(np.asarray(mesh.vertices)[used], corners.reshape(-1, 3), process=False)
 
 
 def _relative(pose_i: np.ndarray, pose_j: np.ndarray) -> np.ndarray:
