@@ -49,6 +49,7 @@ import numpy as np
 from orthosim.case import DEFAULT_CASE  # the paper's case 1, as the demo: ~1,100-1,400 contact spheres a step
 from orthosim.spheretree.bench import tree_build_timings
 
+from .cputime import cpu_ms_per_frame, cpu_snapshot
 from .frame_state import FrameState
 
 TARGET_FPS = 40  # the paper's figure, with a graphics card
@@ -175,6 +176,46 @@ def _render_variants(dentition, states, size, frames_per_round: int, rounds: int
 
 
 
+def _step_against_detector(movement_model, detector: str, n_states: int, warmup: int) -> dict:
+    """Informative, beside fps.simulation and collision_us_per_step (measured minutes apart, so a
+    change of the machine's load between them moves their ratio): the same simulation steps again,
+    each followed by one whole-arch continuous detector step (the collision bench's: rest poses to
+    `perturbed_poses`, every candidate pair, all leaf pairs), medians of both and their ratio."""
+    from orthosim.collision import CollisionRequest, detect_step
+    from orthosim.collision.bench import perturbed_poses
+    from orthosim.collision.detect import default_pairs
+    from orthosim.movement.simulation import simulate as simulate_steps
+
+    model = movement_model.collision
+    rest = movement_model.dentition.rest_poses()
+    end = perturbed_poses(rest)
+    pairs = default_pairs(model)
+    request = CollisionRequest(all_leaf_pairs=True)
+
+    def detector_step():
+        detect_step(model, rest, end, pairs=pairs, detector="continuous", request=request)
+
+    detector_step()
+    wall: dict[str, list[float]] = {"step": [], "sweep": []}
+    cpu: dict[str, list[float]] = {"step": [], "sweep": []}
+    gen = simulate_steps(movement_model, detector, steps=n_states)
+    for i in range(n_states):
+        for key, call in (("step", lambda: next(gen)), ("sweep", detector_step)):
+            t0, c0 = time.perf_counter(), time.thread_time()
+            call()
+            if i >= warmup:
+                wall[key].append(time.perf_counter() - t0)
+                cpu[key].append(time.thread_time() - c0)
+    gen.close()
+    step_us, sweep_us = (1e6 * float(np.median(wall[k])) for k in ("step", "sweep"))
+    step_cpu, sweep_cpu = (1e6 * float(np.median(cpu[k])) for k in ("step", "sweep"))
+    # CPU time as well: on a loaded machine a long call is interrupted more often than a short one,
+    # so the wall-time ratio grows with the load; the CPU-time ratio much less
+    return {"simulation_step_us": step_us, "continuous_step_us": sweep_us, "ratio": step_us / sweep_us,
+            "simulation_step_cpu_us": step_cpu, "continuous_step_cpu_us": sweep_cpu, "cpu_ratio": step_cpu / sweep_cpu,
+            "target_ratio": 3.0}
+
+
 def _overlay_figures(end_to_end, in_child_process, simulate_case, case_obj, detector, n_states, dentition,
                      extracted, e2e_off, rounds: int = 3) -> dict:
     """end_to_end with the frame overlay drawn (caption, day counter, legend; then with FDI labels
@@ -294,9 +335,12 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         update, render, read back, the overlay when `caption` is given (a `render.overlay.FrameCaption`),
         encode on the sink's threads. Timed through its `on_frame` callback."""
         stamps, markers, drawn, moving = [], [], [], []
+        cpu: dict = {}
 
         def on_frame(st, sc):
             stamps.append(time.perf_counter())
+            if len(stamps) in (warm, warm + frames):  # CPU of every thread and child over the measured frames
+                cpu[len(stamps)] = cpu_snapshot()
             markers.append(st.n_contacts)
             drawn.append(len(sc.markers.positions) if st.n_contacts else 0)
             moving.append(len(st.moving))
@@ -322,7 +366,11 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
                                                      "max": int(max(drawn[measured]))},
                 # share of the measured frames in which some tooth moved: a case that has come to
                 # rest draws (cheaply) the same teeth again, so read the fps with this beside it
-                "frames_with_moving_teeth": float(np.mean([m > 0 for m in moving[measured]]))}
+                "frames_with_moving_teeth": float(np.mean([m > 0 for m in moving[measured]])),
+                # informative: where the CPU goes (ms per frame by thread group and child process);
+                # the total over the machine's cores bounds the frame rate end to end can reach
+                "cpu_ms_per_frame": cpu_ms_per_frame(cpu.get(warm), cpu.get(warm + frames), frames),
+                "cores": os.cpu_count()}
 
     encode = ["MP4 encode (libx264 ultrafast)"] + (["PNG frames (render.png)"] if png else [])
     e2e_synthetic = end_to_end(synthetic(i) for i in range(n_states))
@@ -331,6 +379,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     # ---- the real thing: movement + continuous detection per step
     pending: dict[str, str] = {}
     fps_sim = None
+    sim_vs_detector = None
     e2e_sim = None
     e2e_interp = None
     e2e_thread = None
@@ -350,6 +399,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
                 sim_times.append(time.perf_counter() - t0)
         gen.close()
         fps_sim = _median_fps(sim_times)
+        sim_vs_detector = _step_against_detector(movement_model, detector, n_states, warmup)
         # the pipeline of `orthosim run`: the simulation in a child process (orthosim.background),
         # running ahead of the drawing through a bounded queue, so that it does not take turns
         # with the drawing and encoding for this process's GIL
@@ -446,6 +496,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         "end_to_end_simulation_on_thread": e2e_thread,
         "end_to_end_overlay": e2e_overlay,
         "collision_us_per_step": None if collision is None else collision.get("collision_us_per_step"),
+        "simulation_step_against_continuous_interleaved": sim_vs_detector,
         "collision_fps": None if collision is None else {
             k: (1e6 / v if v else None) for k, v in collision.get("collision_us_per_step", {}).items()},
         "collision": collision,

@@ -96,3 +96,77 @@ def test_meshquery_is_geometry_that_needs_no_collision_model():
     meshquery.set_pose(oa, np.eye(4))
     meshquery.set_pose(ob, translation([3.5, 0, 0]))
     assert meshquery.distance(oa, ob) == pytest.approx(0.5, abs=1e-6)
+
+
+def spheres():
+    """Two 1,280-face spheres of radius 3 mm (curved: a close pair's patches are a few faces of each)."""
+    a = trimesh.creation.icosphere(subdivisions=3, radius=3.0)
+    b = trimesh.creation.icosphere(subdivisions=3, radius=3.0)
+    return CollisionModel([Body(1, a, median_split_tree(a), np.eye(4)), Body(2, b, median_split_tree(b), translation([7.0, 0, 0]))])
+
+
+def whole_mesh_answers(model, poses):
+    """(distance, intersecting) of FCL on the two whole meshes, with objects made for this call."""
+    oa, ob = (meshquery.fcl_object(body.mesh) for body in model.bodies)
+    meshquery.set_pose(oa, poses[1])
+    meshquery.set_pose(ob, poses[2])
+    return meshquery.distance(oa, ob), meshquery.collide(oa, ob)[0]
+
+
+def test_a_runs_answers_equal_fcl_on_the_whole_meshes_to_the_last_bit():
+    """Patches, the separation proof and the memo change what FCL is asked, never the answer."""
+    from scipy.spatial.transform import Rotation
+
+    model = spheres()
+    q = ExactQueries(model)
+    rng = np.random.default_rng(7)
+    gaps = [0.3, 0.05, 0.01, 0.002, 0.0005, -0.01, -0.2, 0.01, 0.6, 2.0, 0.02]  # mm between the spheres' surfaces
+    for gap in gaps * 3:
+        T = np.eye(4)
+        T[:3, :3] = Rotation.from_rotvec(rng.normal(size=3) * 0.05).as_matrix()
+        T[:3, 3] = [6.0 + gap, *(rng.normal(size=2) * 0.05)]
+        poses = {1: np.eye(4), 2: T}
+        d, hit = whole_mesh_answers(model, poses)
+        assert q.intersects((1, 2), poses) == hit
+        assert q.distance((1, 2), poses) == d
+        assert q.intersects((1, 2), poses) == hit  # after the distance: the proof of separation, when it holds
+    assert q._patches, "close pairs are answered on patches"
+    patch = next(iter(q._patches.values()))
+    assert 0 < len(patch.faces_i) < len(model.bodies[0].mesh.faces) / 4
+
+
+def test_a_pair_proved_apart_by_its_last_distance_is_not_tested_with_fcl():
+    model, _ = boxes(0.0)
+    q = ExactQueries(model)
+    q.distance((1, 2), {1: np.eye(4), 2: translation([3.5, 0, 0])})  # 0.5 mm apart
+    asked = q.collides
+    assert not q.intersects((1, 2), {1: np.eye(4), 2: translation([3.2, 0, 0])})  # moved 0.3 mm closer: still 0.2 apart
+    assert q.collides == asked
+    assert q.intersects((1, 2), {1: np.eye(4), 2: translation([2.9, 0, 0])})  # moved 0.6 mm: FCL is asked, and they meet
+    assert q.collides == asked + 1
+
+
+def test_contacts_ask_no_interpenetration_of_pairs_whose_leaves_are_apart():
+    model, _ = boxes(0.0)
+    q = ExactQueries(model)
+    far = {1: np.eye(4), 2: translation([8.0, 0, 0])}
+    found = contacts(model, far, CollisionRequest(), q, [(1, 2)], "discrete")
+    assert found.touching == () and found.penetration == {} and q.collides == 0
+    sunk = {1: np.eye(4), 2: translation([2.7, 0, 0])}
+    assert contacts(model, sunk, CollisionRequest(), q, [(1, 2)], "discrete").penetration[(1, 2)] == pytest.approx(0.3, abs=1e-6)
+
+
+def test_a_pose_path_at_time_zero_is_its_start_pose_without_finding_the_rotation():
+    from scipy.spatial.transform import Rotation
+
+    from orthosim.collision.motion import PosePath, interpolate_pose
+
+    T0, T1 = np.eye(4), np.eye(4)
+    T0[:3, :3] = Rotation.from_rotvec([0.3, -0.2, 0.1]).as_matrix()
+    T0[:3, 3] = [12.5, -3.25, 7.0]
+    T1[:3, :3] = Rotation.from_rotvec([0.01, 0.0, -0.02]).as_matrix() @ T0[:3, :3]
+    T1[:3, 3] = T0[:3, 3] + [0.1, 0.02, -0.05]
+    path = PosePath(T0, T1)
+    assert path.at(0.0).tobytes() == interpolate_pose(T0, T1, 0.0).tobytes()
+    assert path._w is None
+    assert path.at(0.4).tobytes() == interpolate_pose(T0, T1, 0.4).tobytes()

@@ -22,9 +22,9 @@ def count_distance_calls(monkeypatch):
     calls = {"n": 0}
     original = meshquery.distance
 
-    def counted(a, b):
+    def counted(a, b, **kwargs):
         calls["n"] += 1
-        return original(a, b)
+        return original(a, b, **kwargs)
 
     monkeypatch.setattr(meshquery, "distance", counted)
     return calls

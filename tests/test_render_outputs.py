@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 
 import imageio.v3 as iio
 import imageio_ffmpeg
@@ -92,7 +93,11 @@ def test_bench_record_follows_the_output_contract(tmp_path, dentition):
     assert fps["render"] > 0 and fps["end_to_end"] > 0
     # no simulation plugged in: reported as missing, never as a number
     assert fps["simulation"] is None and "simulation" in record["pending"]
+    assert record["simulation_step_against_continuous_interleaved"] is None
     assert record["memory_mb"]["start"] > 0 and record["memory_mb"]["end"] > 0
+    cpu = record["end_to_end"]["cpu_ms_per_frame"]  # where end to end spends its CPU (Linux /proc)
+    if sys.platform.startswith("linux"):
+        assert cpu["main"] > 0 and cpu["total"] >= cpu["main"] + cpu.get("png", 0.0)
 
 
 def test_synthetic_motion_moves_only_the_moving_teeth(dentition):

@@ -139,8 +139,9 @@ def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, 
         queries = ExactQueries(model, memo_size=16)
     # Strides use the bound on how fast the gap can close (relative motion); the tolerance is
     # travel of the teeth themselves, so teeth moving together are still stopped precisely.
-    mu = relative_speed_bound(T0a, T1a, model.rho_max[i_a], T0b, T1b, model.rho_max[i_b])
-    travel = max_speed(T0a, T1a, model.rho_max[i_a]) + max_speed(T0b, T1b, model.rho_max[i_b])
+    angles = rotation_angle(T0a, T1a), rotation_angle(T0b, T1b)
+    mu = relative_speed_bound(T0a, T1a, model.rho_max[i_a], T0b, T1b, model.rho_max[i_b], angles)
+    travel = max_speed(T0a, T1a, model.rho_max[i_a], angles[0]) + max_speed(T0b, T1b, model.rho_max[i_b], angles[1])
 
     path_a, path_b = PosePath(T0a, T1a), PosePath(T0b, T1b)
 

@@ -188,14 +188,20 @@ def contacts(model: CollisionModel, poses: Mapping[int, np.ndarray], request: Co
     pairs = [tuple(map(int, p)) for p in pairs]
     tol = request.touch_tolerance_mm
     distance: dict[tuple[int, int], float] = {}
+    # the pairs whose meshes may intersect: FCL is asked their interpenetration, the rest are apart
+    # (exact: a distance above 0; sphere trees: no overlapping leaf pair, the trees being conservative)
+    may_meet = pairs
     if detector == "exact":
         distance = {p: queries.distance(p, poses) for p in pairs}
         touching = [p for p in pairs if distance[p] <= tol]
+        may_meet = [p for p in pairs if distance[p] <= 0.0]
         centers, radii = np.zeros((0, 3)), np.zeros(0)
     else:
         res = detect_step(model, poses, None, pairs, "circles" if detector == "circles" else "discrete",
                           CollisionRequest(all_leaf_pairs=True))
         touching = res.touching_pairs()
+        if detector != "circles":
+            may_meet = touching
         if detector == "continuous":
             distance = {p: queries.distance(p, poses) for p in touching}
             touching = [p for p in touching if distance[p] <= tol]
@@ -206,4 +212,4 @@ def contacts(model: CollisionModel, poses: Mapping[int, np.ndarray], request: Co
         else:
             centers = np.concatenate([res.centers_a[keep], res.centers_b[keep]])
             radii = np.concatenate([res.radii_a[keep], res.radii_b[keep]])
-    return Contacts(tuple(touching), centers, radii, queries.penetrations(pairs, poses), distance)
+    return Contacts(tuple(touching), centers, radii, queries.penetrations(may_meet, poses), distance)

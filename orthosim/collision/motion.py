@@ -88,15 +88,26 @@ class PosePath:
     """One tooth's motion over a step, T0 -> T1 (4, 4), asked for its pose at many times.
 
     `at(t)` is `interpolate_pose(T0, T1, t)`, the same arithmetic, with the rotation vector found
-    once instead of at every call (conservative advancement asks for a pose per stride).
+    once, at the first time after 0 asked for, instead of at every call (conservative advancement
+    asks for a pose per stride, and often only for t = 0, where the pose is T0 itself: the
+    arithmetic multiplies T0 by an identity and adds zeros).
     """
 
     def __init__(self, T0: np.ndarray, T1: np.ndarray):
         self.T0 = np.asarray(T0, float)
         self.T1 = np.asarray(T1, float)
-        self.w = rotation_vector(self.T0, self.T1)
+        self._w: np.ndarray | None = None
+
+    @property
+    def w(self) -> np.ndarray:
+        """(3,) the step's rotation vector (radians)."""
+        if self._w is None:
+            self._w = rotation_vector(self.T0, self.T1)
+        return self._w
 
     def at(self, t: float | np.ndarray) -> np.ndarray:
+        if np.ndim(t) == 0 and t == 0.0:
+            return self.T0.copy()
         return _pose_at(self.T0, self.T1, self.w, t)
 
 
@@ -120,24 +131,28 @@ def chord_deviation_bound(theta: np.ndarray, rho: np.ndarray) -> np.ndarray:
     return np.asarray(rho, float) * np.minimum(theta * theta / 8.0, 2.0)
 
 
-def max_speed(T0: np.ndarray, T1: np.ndarray, rho_max: float) -> float:
-    """mm per unit step time: bound on the speed of any point within rho_max of the local origin."""
-    theta = float(rotation_angle(T0, T1))
+def max_speed(T0: np.ndarray, T1: np.ndarray, rho_max: float, angle: float | None = None) -> float:
+    """mm per unit step time: bound on the speed of any point within rho_max of the local origin
+    (angle: `rotation_angle(T0, T1)` when the caller has it)."""
+    theta = float(rotation_angle(T0, T1)) if angle is None else float(angle)
     return float(np.linalg.norm(np.asarray(T1)[:3, 3] - np.asarray(T0)[:3, 3]) + theta * rho_max)
 
 
 def relative_speed_bound(T0a: np.ndarray, T1a: np.ndarray, rho_a: float,
-                         T0b: np.ndarray, T1b: np.ndarray, rho_b: float) -> float:
+                         T0b: np.ndarray, T1b: np.ndarray, rho_b: float,
+                         angles: tuple[float, float] | None = None) -> float:
     """mm per unit step time: bound on how fast the distance between two moving bodies can shrink.
 
     A point of body a moves at v_a + w_a x r (v_a its origin's constant velocity, |w_a| = theta_a,
     |r| <= rho_a), likewise for b, so any two points approach at most at
     |v_a - v_b| + theta_a rho_a + theta_b rho_b. Unlike the sum of the two bodies' own speeds, this
     is near zero for teeth translating together, so conservative advancement takes full strides
-    instead of crawling.
+    instead of crawling. angles: (theta_a, theta_b), `rotation_angle` of the two motions, when the
+    caller has them.
     """
     dv = (np.asarray(T1a)[:3, 3] - np.asarray(T0a)[:3, 3]) - (np.asarray(T1b)[:3, 3] - np.asarray(T0b)[:3, 3])
-    return float(np.linalg.norm(dv) + rotation_angle(T0a, T1a) * rho_a + rotation_angle(T0b, T1b) * rho_b)
+    theta_a, theta_b = angles if angles is not None else (rotation_angle(T0a, T1a), rotation_angle(T0b, T1b))
+    return float(np.linalg.norm(dv) + theta_a * rho_a + theta_b * rho_b)
 
 
 def interpolate_poses(T0: np.ndarray, T1: np.ndarray, t: np.ndarray) -> np.ndarray:

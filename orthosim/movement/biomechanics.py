@@ -42,6 +42,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .vec import length
+
 from ..tooth import ROOT, Tooth
 from .resistance import center_of_resistance, tipping_center
 
@@ -192,7 +194,7 @@ class Motion:
 def _rotation(rotvec: np.ndarray) -> np.ndarray:
     from ..pose import rotation_about_axis
 
-    a = float(np.linalg.norm(rotvec))
+    a = length(rotvec)
     return np.eye(3) if a == 0.0 else rotation_about_axis(rotvec / a, a)
 
 
@@ -211,13 +213,13 @@ def tooth_motion(mech: ToothMechanics, pose: np.ndarray, force_cN: np.ndarray, p
     axis = R[:, 1]
     F = np.asarray(force_cN, float)
     Mc = np.asarray(couple_cNmm, float)
-    f = float(np.linalg.norm(F))
+    f = length(F)
     area = mech.root_area_mm2
     if wire == "round":
         Q = R @ mech.tipping_center + p
         M = (np.cross(np.asarray(point, float) - Q, F) if f > 0 else 0.0) + Mc
-        m = float(np.linalg.norm(M))
-        lever = float(np.linalg.norm((point if f > 0 else B) - Q)) or 1.0
+        m = length(M)
+        lever = length((point if f > 0 else B) - Q) or 1.0
         if m == 0.0:
             return Motion.still(Q)
         return Motion(Q, np.zeros(3), M / m * law.rate(m / lever, area) / lever)
@@ -231,8 +233,8 @@ def tooth_motion(mech: ToothMechanics, pose: np.ndarray, force_cN: np.ndarray, p
     # about the bracket (the paper's centre of rotation at the crown)
     spin = _axial_spin(Mc, axis, area, law)
     rest = Mc - axis * (Mc @ axis)
-    d = float(np.linalg.norm(B - C)) or 1.0
-    m = float(np.linalg.norm(rest))
+    d = length(B - C) or 1.0
+    m = length(rest)
     tip = rest / m * law.rate(m / d, area) / d if m > 0 else np.zeros(3)
     if not np.any(tip):
         return Motion(C, np.zeros(3), spin)

@@ -22,6 +22,8 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from .vec import length
+
 
 @dataclass(frozen=True, eq=False)
 class ForceBalance:
@@ -69,7 +71,7 @@ def propagate(applied: Mapping[int, np.ndarray], contacts: Sequence[tuple[int, i
         passed = {}
         for i, j, n in edges:
             c = float(total[i] @ n)
-            if c > 0 and can_pass(i, float(np.linalg.norm(total[i]))):
+            if c > 0 and can_pass(i, length(total[i])):
                 d = n if onward is None else np.asarray(onward.get((i, j), n), float)
                 passed[(i, j)] = share * c * d
                 new[j] += passed[(i, j)]
