@@ -151,6 +151,24 @@ def test_the_bvh_memo_keeps_the_most_recently_used_meshes_only(monkeypatch):
     meshquery.forget_bvhs()
 
 
+def test_a_throw_away_mesh_stays_out_of_the_bvh_memo_and_pushes_no_tooth_out(monkeypatch):
+    # the exact queries' patches (a few faces of a tooth near another) are built afresh each time
+    monkeypatch.setattr(meshquery, "BVH_MEMO_SIZE", 2)
+    meshquery.forget_bvhs()
+    teeth = [_tooth(20), _tooth(21)]
+    for m in teeth:
+        meshquery.bvh(m)
+    builds = meshquery.bvh_builds
+    patch = trimesh.Trimesh(teeth[0].vertices, teeth[0].faces[:40])
+    obj = meshquery.fcl_object(patch, memo=False)
+    whole = meshquery.fcl_object(teeth[1])
+    assert meshquery.collide(obj, whole)[0]  # the patch's BVH is whole and usable
+    assert len(meshquery._BVHS) == 2 and meshquery.bvh_builds == builds
+    meshquery.bvh(teeth[0])
+    assert meshquery.bvh_builds == builds  # both teeth still in the memo
+    meshquery.forget_bvhs()
+
+
 def test_the_second_run_of_a_model_builds_no_bvh_and_gives_the_same_metrics(case_file, tmp_path):
     from orthosim.cli import run_case
 

@@ -224,7 +224,7 @@ class ExactQueries:
             faces.append(kept[np.argsort(gap[kept], kind="stable")])  # nearest first: FCL's distance starts from faces 0
         if not len(faces[0]) or not len(faces[1]):
             return _Patch(M, N, *faces)
-        objects = [meshquery.fcl_object(_submesh(self.model.bodies[k].mesh, f)) for k, f in ((i, faces[0]), (j, faces[1]))]
+        objects = [meshquery.fcl_object(_submesh(self.model.bodies[k].mesh, f), memo=False) for k, f in ((i, faces[0]), (j, faces[1]))]
         return _Patch(M, N, *faces, *objects)
 
     def _face_spheres(self, i: int) -> tuple[np.ndarray, np.ndarray]:

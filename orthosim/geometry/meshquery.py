@@ -24,10 +24,10 @@ import trimesh
 BVH_MEMO_SIZE = 32
 _BVHS: OrderedDict[tuple, fcl.BVHModel] = OrderedDict()
 _BVHS_LOCK = threading.Lock()
-bvh_builds = 0  # BVHs built by this process (the rest came from the memo)
+bvh_builds = 0  # BVHs built by this process for the memo (the rest came from it; patches are not counted)
 
 
-def fcl_object(mesh: trimesh.Trimesh) -> fcl.CollisionObject:
+def fcl_object(mesh: trimesh.Trimesh, memo: bool = True) -> fcl.CollisionObject:
     """A python-fcl BVH (OBB-RSS) collision object of a mesh in its local frame (mm).
 
     Each call gives an object of its own (its pose is its state), around a BVH shared with every
@@ -35,8 +35,10 @@ def fcl_object(mesh: trimesh.Trimesh) -> fcl.CollisionObject:
     a run's set-up. Sharing is safe in python-fcl: after `endModel` nothing changes the geometry
     but the local bounding box each new object computes (to the same values), an object keeps a
     reference to its Python geometry and frees only its own C++ object, and the C++ BVH is freed
-    by the Python geometry alone, once no object or memo entry holds it."""
-    return fcl.CollisionObject(bvh(mesh), fcl.Transform())
+    by the Python geometry alone, once no object or memo entry holds it.
+    memo=False: a throw-away mesh (a patch of a tooth) whose BVH is built afresh and kept out of
+    the memo, so it neither costs a digest nor pushes a whole tooth's BVH out."""
+    return fcl.CollisionObject(bvh(mesh) if memo else _build_bvh(mesh), fcl.Transform())
 
 
 def bvh(mesh: trimesh.Trimesh) -> fcl.BVHModel:
@@ -52,15 +54,22 @@ def bvh(mesh: trimesh.Trimesh) -> fcl.BVHModel:
         if g is not None:
             _BVHS.move_to_end(key)
             return g
-        g = fcl.BVHModel()
-        g.beginModel(len(vertices), len(faces))
-        g.addSubModel(vertices, faces)
-        g.endModel()
+        g = _build_bvh(mesh)
         bvh_builds += 1
         _BVHS[key] = g
         while len(_BVHS) > BVH_MEMO_SIZE:
             _BVHS.popitem(last=False)
         return g
+
+
+def _build_bvh(mesh: trimesh.Trimesh) -> fcl.BVHModel:
+    vertices = np.ascontiguousarray(mesh.vertices, dtype=float)
+    faces = np.ascontiguousarray(mesh.faces, dtype=np.int32)
+    g = fcl.BVHModel()
+    g.beginModel(len(vertices), len(faces))
+    g.addSubModel(vertices, faces)
+    g.endModel()
+    return g
 
 
 def forget_bvhs() -> None:
