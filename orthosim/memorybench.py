@@ -97,10 +97,14 @@ _PFN_MASK = (1 << 55) - 1
 _PRESENT = 1 << 63
 
 
+class _Hidden(Exception):
+    """Page frame numbers read as zeros: reading them needs CAP_SYS_ADMIN."""
+
+
 def _frames(pid: int):
     """The physical page frame numbers of a process's resident pages (a numpy array), from
-    /proc/PID/pagemap; None when the frames are hidden (reading them needs CAP_SYS_ADMIN, else the
-    kernel gives zeros) or the process is gone."""
+    /proc/PID/pagemap; None when it cannot be read now (gone, or changing: an exec). Raises `_Hidden`
+    when the kernel hides the frames."""
     import numpy as np
 
     found = []
@@ -118,22 +122,21 @@ def _frames(pid: int):
         return None
     frames = np.concatenate(found) if found else np.zeros(0, np.uint64)
     if len(frames) and not frames.any():
-        return None
+        raise _Hidden(pid)
     return frames
 
 
-def _tree_unique_kb(pids) -> int | None:
+def _tree_unique_kb(pids) -> int:
     """kB of distinct physical pages resident in any process of `pids` (each page once, however many
-    of them map it); None when page frames cannot be read here."""
+    of them map it); 0 when a process could not be read this time (the sample is skipped). Raises
+    `_Hidden` when page frames cannot be read here."""
     import numpy as np
 
     parts = []
     for p in pids:
         frames = _frames(p)
         if frames is None:
-            if os.path.exists(f"/proc/{p}"):
-                return None
-            continue
+            return 0
         parts.append(frames)
     if not parts:
         return 0
@@ -187,8 +190,10 @@ def measure_peak_memory(argv: list[str], *, cwd: str | Path | None = None, env: 
         tree_kb = max(tree_kb, total)
         pss_kb = max(pss_kb, sum(_pss_kb(p) for p in pids))
         if unique_kb is not None and time.monotonic() >= next_unique:  # tens of ms a time: every unique_interval_s
-            now = _tree_unique_kb(pids)
-            unique_kb = None if now is None else max(unique_kb, now)
+            try:
+                unique_kb = max(unique_kb, _tree_unique_kb(pids))
+            except _Hidden:
+                unique_kb = None
             next_unique = time.monotonic() + unique_interval_s
         samples += 1
         if time.monotonic() > deadline:
