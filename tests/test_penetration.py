@@ -92,9 +92,8 @@ def _sampled_depth(mesh_a, pose_a, mesh_b, pose_b, count: int, seed: int) -> flo
 def test_agrees_with_dense_sampling_and_is_never_below_the_vertex_depth(seed):
     rng = np.random.default_rng(seed)
     tooth = trimesh.creation.icosphere(2, 3.0)  # coarse facets: vertices miss the deepest points
-    angle = rng.uniform(0, np.pi)
-    pose_b = _rotation(angle, rng.normal(size=3))
-    pose_b[:3, 3] = rng.normal(size=3) / np.linalg.norm(rng.normal(size=3)) * 0 + [5.6, 0.0, 0.0]
+    pose_b = _rotation(rng.uniform(0, np.pi), rng.normal(size=3))  # facets meeting at random
+    pose_b[:3, 3] = [5.6, 0.0, 0.0]  # two 3 mm spheres, centres 5.6 mm apart
     depth = penetration_depth(tooth, I4, tooth, pose_b)
     vertex = meshquery.penetration_depth(tooth, I4, tooth, pose_b)
     sampled = _sampled_depth(tooth, I4, tooth, pose_b, 20_000, seed)
