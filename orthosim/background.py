@@ -41,6 +41,9 @@ If this process is killed outright, the child ends with it (`orthosim.lifeline.e
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import gc
 import importlib
 import multiprocessing
 import os
@@ -117,6 +120,11 @@ class ChildProcessIterator:
             raise RuntimeError("this child process has its work already")
         self._submitted = True
         if self._work is None:
+            # the objects made so far are shared with the child page by page until written; the
+            # collector writes to every object it scans, copying nearly all of them into both
+            # processes: frozen, it leaves them alone (they are kept for the run anyway)
+            gc.freeze()
+            release_freed_heap()  # the child starts from the heap this process really uses
             self._start(self._ctx.Process(target=_produce, args=(None, self._queue, self._stop, self._ignore_warnings, (),
                                                                  os.getpid(), (factory, args, kwargs)),
                                           name=self._name, daemon=False))
@@ -225,6 +233,16 @@ def fork_is_safe() -> bool:
     return (sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
             and threading.active_count() == 1
             and threading.current_thread() is threading.main_thread())
+
+
+def release_freed_heap() -> bool:
+    """Hand the C heap's free pages back to the system (glibc `malloc_trim`): building a model
+    leaves tens of MB freed but still mapped (measured: a 28-tooth child, 327 -> 298 MB). Milliseconds;
+    False where the C library is not glibc."""
+    try:
+        return bool(ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0))
+    except (OSError, AttributeError):
+        return False
 
 
 def _portable(exc: BaseException) -> bytes:

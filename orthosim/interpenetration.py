@@ -4,8 +4,11 @@ Segmented CBCT teeth often overlap their neighbours or the teeth they bite on by
 millimetre where the segmentation met (a "segmentation touch"). That overlap is the patient's
 rest state, not a collision: the simulator measures it once at load, reports it, and from then on
 only stops a move that makes such a pair interpenetrate deeper (`orthosim.movement.simulation`).
-Which pairs intersect is decided exactly on the meshes (FCL); how deep is the largest depth of any
-vertex of one tooth inside the other (`geometry.meshquery.penetration_depth`), in mm.
+Which pairs intersect is decided exactly on the meshes (FCL); how deep is measured on every point of
+their triangles and by the largest ball inside both (`geometry.penetration.penetration_depth`), in
+mm, so that two teeth at the same place, or crossing edge to edge, read a real depth (a vertex-based
+depth reads 0 for both). Meshes that are not closed and consistently oriented have no reliable
+inside for that measure and get the vertex-based one (`geometry.meshquery.penetration_depth`).
 
 The same measure sets how much the occlusal sliding rule lets teeth of the two arches sink while
 they slide along each other (`default_occlusal_slide_mm`): where a model's surfaces already
@@ -36,7 +39,8 @@ def rest_interpenetration(dentition: Dentition, pairs=None) -> dict[tuple[int, i
 
     `pairs`: the pairs to check (by default the simulator's candidates: arch neighbours and facing
     teeth of the other arch). A pair FCL finds intersecting keeps its entry even when no vertex
-    lies inside the other mesh (edge-edge crossings): its depth is then 0.0 mm.
+    lies inside the other mesh and no ball fits inside both (surfaces crossing by less than the
+    depth measure's 0.01 mm tolerance): its depth is then about 0.0 mm.
     """
     from .collision import candidate_pairs
     from .geometry import meshquery
@@ -51,8 +55,38 @@ def rest_interpenetration(dentition: Dentition, pairs=None) -> dict[tuple[int, i
     for a, b in pairs:
         if meshquery.collide(objects[a], objects[b])[0]:
             ta, tb = dentition.teeth[a], dentition.teeth[b]
-            out[(a, b)] = meshquery.penetration_depth(ta.mesh, ta.rest_pose, tb.mesh, tb.rest_pose)
+            out[(a, b)] = pair_depth(ta.mesh, ta.rest_pose, tb.mesh, tb.rest_pose)
     return out
+
+
+def pair_depth(mesh_a, pose_a, mesh_b, pose_b) -> float:
+    """mm two posed tooth meshes interpenetrate: `geometry.penetration.penetration_depth` for closed,
+    consistently oriented meshes, else the vertex-based `geometry.meshquery.penetration_depth`."""
+    from .geometry import meshquery
+
+    if all(m.is_watertight and m.is_winding_consistent for m in (mesh_a, mesh_b)):
+        from .geometry.penetration import penetration_depth
+
+        return penetration_depth(mesh_a, pose_a, mesh_b, pose_b)
+    return meshquery.penetration_depth(mesh_a, pose_a, mesh_b, pose_b)
+
+
+def start_depths(dentition: Dentition, penetrating, poses) -> list[tuple[tuple[int, int], float]]:
+    """The depth of each pair interpenetrating at a run's start, deepest first: the larger of the
+    run's own reading (`penetrating`: ((a, b), mm) for the pairs whose meshes intersect, from its
+    exact queries, vertex-based: 0 for two teeth at the same place) and `pair_depth` at `poses`, or
+    for a pair at its rest poses the depth measured at load (`info["rest_interpenetration_mm"]`)."""
+    import numpy as np
+
+    measured = dentition.info.get("rest_interpenetration_mm") or {}
+    out = {}
+    for (a, b), mm in penetrating:
+        ta, tb = dentition.teeth[a], dentition.teeth[b]
+        at_rest = all(np.array_equal(np.asarray(poses[t.fdi], float), np.asarray(t.rest_pose, float)) for t in (ta, tb))
+        known = measured.get(f"{a}-{b}", measured.get(f"{b}-{a}")) if at_rest else None
+        depth = float(known) if known is not None else pair_depth(ta.mesh, poses[a], tb.mesh, poses[b])
+        out[(a, b)] = max(float(mm), depth)
+    return sorted(out.items(), key=lambda kv: -kv[1])
 
 
 def report_rest_interpenetration(dentition: Dentition, where) -> Dentition:

@@ -190,6 +190,7 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None) 
     """The simulation side of a run: PhaseDone("model"), PhaseDone("trees"), one StepRecord per step,
     then the RunResult. Picklable arguments: it runs in the child process when the run draws.
     The per-step detail (steps.jsonl, distances_per_step.csv) streams into out_dir as it comes."""
+    from .background import release_freed_heap
     from .collision import CollisionModel, ExactQueries
     from .metrics import occlusion_summary
     from .movement.report import DISTANCES_PER_STEP_FILE, STEPS_FILE, RunReport
@@ -205,6 +206,7 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None) 
     queries.prepare(n for n in dent.fdis if n not in extracted)
     t2 = time.perf_counter()
     model = MovementModel.build(case, dent, collision=collision)
+    release_freed_heap()  # what building the model freed, before a run of any length
     t3 = time.perf_counter()
     how = "from the cache" if cached else ("given" if dentition is not None else "built")
     yield PhaseDone("model", (t1 - t0) + (t3 - t2), f"{dent.description}, {how}")

@@ -2,7 +2,7 @@
 
 A step of the simulation spans days; an animation wants many frames per step. Between two step
 records each tooth follows the same motion the continuous collision detector assumes
-(`orthosim.collision.motion.interpolate_pose`: its local origin on a straight line, its rotation
+(`orthosim.geometry.motion.interpolate_pose`: its local origin on a straight line, its rotation
 at constant angular velocity), so what is drawn is exactly what was checked for collisions. The
 contact areas drawn during a step are those found at its end, where the teeth arrive.
 """
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Iterable, Iterator
 
-from orthosim.collision.motion import interpolate_pose
+from orthosim.geometry.motion import interpolate_pose
 
 from .frame_state import FrameState
 

@@ -49,3 +49,18 @@ def test_teeth_interpenetrating_at_the_start_are_named_with_their_depth_in_a_war
     metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())
     assert metrics["initial_interpenetration"][0]["pair"] == [11, 21]
     assert 0.9 < metrics["initial_interpenetration"][0]["mm"] <= 1.0
+
+
+def test_two_teeth_at_the_same_place_warn_with_the_pair_and_a_real_depth_and_the_summary_reports_it(tmp_path):
+    _two_incisors(tmp_path / "teeth", overlap_mm=6.0)  # both capsules at x = 0: one tooth inside the other
+    (tmp_path / "case.toml").write_text(CASE)
+    r = run("run", tmp_path / "case.toml", "--out", tmp_path / "o", "--no-render")
+    assert r.returncode == 0, r.stderr
+    # every vertex of each lies on the other's surface: a vertex-based depth reads 0 here; the
+    # largest ball inside both is about the capsules' radius, 3 mm
+    (warning,) = r.stderr.strip().splitlines()
+    assert "interpenetrate at the start" in warning and "11 and 21 by 2.9" in warning
+    assert "max penetration" in r.stdout and "beyond the 2.9" in r.stdout and "teeth 11-21" in r.stdout
+    metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    assert metrics["initial_interpenetration"][0]["pair"] == [11, 21]
+    assert 2.8 < metrics["initial_interpenetration"][0]["mm"] <= 3.0

@@ -41,6 +41,7 @@ import numpy as np
 
 from ..atomic import atomic_path, to_jsonable, write_json, write_text
 from ..collision.motion import rotation_angle
+from ..interpenetration import start_depths
 from .biomechanics import movement_type
 from .simulation import MovementModel, StepRecord
 
@@ -73,6 +74,7 @@ class RunReport:
         self.model = model
         self.detector = detector
         self.first: StepRecord | None = None
+        self._start: list | None = None  # ((a, b), mm) interpenetrating at the start, deepest first
         self.last: StepRecord | None = None
         self.max_penetration_mm = 0.0
         self.collisions = 0
@@ -131,11 +133,17 @@ class RunReport:
     def initial_interpenetration(self) -> list[dict]:
         """Pairs interpenetrating at the start beyond the touch tolerance: [{pair, mm}], deepest first."""
         tol = self.model.settings.touch_tolerance_mm
-        first = self.first
-        return [{"pair": list(p), "mm": d} for p, d in (first.penetrating if first else ()) if d > tol]
+        return [{"pair": list(p), "mm": d} for p, d in self._start_depths() if d > tol]
+
+    def _start_depths(self) -> list:
+        if self.first is None:
+            return []
+        if self._start is None:
+            self._start = start_depths(self.model.dentition, self.first.penetrating, self.first.poses)
+        return self._start
 
     def _warn_initial_interpenetration(self, first: StepRecord) -> None:
-        deep = [(p, d) for p, d in first.penetrating if d > self.model.settings.touch_tolerance_mm]
+        deep = [(p, d) for p, d in self._start_depths() if d > self.model.settings.touch_tolerance_mm]
         if not deep:
             return
         shown = ", ".join(f"{a} and {b} by {d:.3f} mm" for (a, b), d in deep[:5])
