@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import trimesh
@@ -103,6 +105,34 @@ def test_cache_key_follows_mesh_and_request(tmp_path):
     moved = v.copy()
     moved[0, 0] += 1e-9
     assert base != cache_key(moved, f, "fit", 8, 4)
+
+
+def test_cache_key_follows_the_builder_source(monkeypatch):
+    """An edited builder must never be served a tree its older self stored."""
+    from orthosim.spheretree import cache
+
+    mesh = _mesh()
+    base = cache_key(mesh.vertices, mesh.faces, "fit", 8, 4)
+    monkeypatch.setattr(cache, "builder_source_digest", lambda: "0" * 64)
+    assert cache_key(mesh.vertices, mesh.faces, "fit", 8, 4) != base
+
+
+def test_every_module_the_tree_builders_import_is_part_of_the_cache_key():
+    """Every spheretree module a keyed builder module imports (at any depth) is keyed too, and the
+    digest reads the files' current text."""
+    import ast
+
+    from orthosim.spheretree import cache
+
+    package = Path(cache.__file__).resolve().parent
+    keyed = set(cache._BUILDER_MODULES)
+    missing = set()
+    for name in keyed:
+        for node in ast.walk(ast.parse((package / f"{name}.py").read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module and node.module not in keyed:
+                missing.add(f"{name} imports {node.module}")
+    assert not missing, sorted(missing)
+    assert {"build", "fit", "octree"} <= keyed
 
 
 def test_damaged_cache_entry_is_rebuilt(tmp_path):

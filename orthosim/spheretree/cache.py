@@ -1,9 +1,10 @@
 """On-disk cache of sphere trees, keyed by the mesh's content and the build request.
 
 A tree depends only on the mesh's vertices and faces, the method, branching, depth and the builder's
-code, so the key is a SHA-256 of exactly those (plus `BUILDER_VERSION`, bumped whenever a builder
-changes its output). A hit loads one small .npz in milliseconds; a miss builds and writes the file
-atomically, so two processes racing on the same tree both end with a whole file. The folder is
+code, so the key is a SHA-256 of exactly those: the source text of the modules that build trees
+(`_BUILDER_MODULES`) enters the key, so an edited builder never serves a tree an older one stored,
+and `BUILDER_VERSION` is bumped as well whenever a builder changes its output on purpose. A hit
+loads one small .npz in milliseconds; a miss builds and writes the file atomically, so two processes racing on the same tree both end with a whole file. The folder is
 `$ORTHOSIM_CACHE` if set, else `~/.cache/orthosim/spheretrees`.
 
 Left and right teeth are mirror images (x -> -x in the local frame, see `orthosim.tooth`), and a
@@ -15,6 +16,7 @@ and `cached_sphere_trees` spreads those builds over the machine's cores (one pro
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import multiprocessing
 import os
@@ -31,7 +33,20 @@ from ..lifeline import exit_with_parent
 from .build import build_sphere_tree, check_request, mesh_arrays
 from .tree import SphereTree
 
-BUILDER_VERSION = 9
+BUILDER_VERSION = 10
+# Modules whose code decides what a built tree holds: their source is part of the key.
+_BUILDER_MODULES = ("build", "fit", "octree", "enclose", "outside_band", "inside", "tree")
+_PACKAGE = Path(__file__).resolve().parent
+
+
+@functools.cache
+def builder_source_digest() -> str:
+    """Hex SHA-256 of the source text of the tree-building modules (read once a process)."""
+    h = hashlib.sha256()
+    for name in _BUILDER_MODULES:
+        h.update(name.encode())
+        h.update((_PACKAGE / f"{name}.py").read_bytes())
+    return h.hexdigest()
 
 
 def default_cache_dir() -> Path:
@@ -40,11 +55,12 @@ def default_cache_dir() -> Path:
 
 
 def cache_key(vertices: np.ndarray, faces: np.ndarray, method: str, branching: int, depth: int) -> str:
-    """Hex SHA-256 of the mesh's bytes (float64 vertices, int64 faces) and the build request."""
+    """Hex SHA-256 of the mesh's bytes (float64 vertices, int64 faces), the build request and the
+    builder (version and source, `builder_source_digest`)."""
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(vertices, dtype=np.float64).tobytes())
     h.update(np.ascontiguousarray(faces, dtype=np.int64).tobytes())
-    h.update(f"|{method}|{branching}|{depth}|v{BUILDER_VERSION}|{len(vertices)}|{len(faces)}".encode())
+    h.update(f"|{method}|{branching}|{depth}|v{BUILDER_VERSION}|{builder_source_digest()}|{len(vertices)}|{len(faces)}".encode())
     return h.hexdigest()
 
 
