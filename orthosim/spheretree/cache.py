@@ -4,8 +4,9 @@ A tree depends only on the mesh's vertices and faces, the method, branching, dep
 code, so the key is a SHA-256 of exactly those: the source text of the modules that build trees
 (`_BUILDER_MODULES`) enters the key, so an edited builder never serves a tree an older one stored,
 and `BUILDER_VERSION` is bumped as well whenever a builder changes its output on purpose. A hit
-loads one small .npz in milliseconds; a miss builds and writes the file atomically, so two processes racing on the same tree both end with a whole file. The folder is
-`$ORTHOSIM_CACHE` if set, else `~/.cache/orthosim/spheretrees`.
+loads one small .npz in milliseconds; a miss builds and writes the file atomically, so two
+processes racing on the same tree both end with a whole file. The folder is `$ORTHOSIM_CACHE` if
+set, else `~/.cache/orthosim/spheretrees`.
 
 Left and right teeth are mirror images (x -> -x in the local frame, see `orthosim.tooth`), and a
 mirror maps a conservative tree to a conservative tree exactly (negating a float is exact), so a
