@@ -237,6 +237,12 @@ class _LeafFitter:
         # Ties (e.g. no outside voxel at all) go to the smaller sphere.
         return cnt + self.options.gap_weight * gap / self.voxel**3 + r / (100 * r.max()), r
 
+    def best(self, pts: np.ndarray, centres: np.ndarray, bound: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The argmin over each row of `score(pts, centres)` and its score, (L,) each, counting only what
+        can win; with `bound` (L,), only scores strictly below it count (index -1 where none is)."""
+        r, gap = _radius_and_gap(np.ascontiguousarray(pts, dtype=np.float64), np.ascontiguousarray(centres, dtype=np.float64))
+        return self.band.best(centres, r, self.options.gap_weight * gap / self.voxel**3, r / (100 * r.max()), bound)
+
     def handoff(self, leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray, k: int = 6) -> np.ndarray:
         """Hand the triangles that set a leaf's radius to a neighbour that may grow, where that pays.
 
@@ -308,10 +314,8 @@ class _LeafFitter:
             if not len(act):
                 break
             cand = c[act, None, :] + step[act, None, None] * dirs[None, :, :]
-            s, _ = self.score(pts[act], cand)
-            j = s.argmin(axis=1)
-            sj = s[np.arange(len(act)), j]
-            improved = sj < best_s[act]
+            j, sj = self.best(pts[act], cand, best_s[act])
+            improved = j >= 0
             moved = act[improved]
             c[moved] = cand[improved, j[improved]]
             best_s[moved] = sj[improved]
@@ -331,8 +335,7 @@ class _LeafFitter:
         n = normal / np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
         t = np.asarray(self.options.depths)
         cand = c0[:, None, :] - (r0[:, None] * t[None, :])[:, :, None] * n[:, None, :]
-        s, _ = self.score(pts, cand)
-        c = cand[np.arange(len(pts)), s.argmin(axis=1)]
+        c = cand[np.arange(len(pts)), self.best(pts, cand)[0]]
         c = self.search(pts, c, 0.25 * r0, search_rounds)
         return c, radii_to_cover(pts, c)
 
