@@ -204,7 +204,7 @@ def test_rebalancing_trades_cheap_merges_for_dear_splits_and_keeps_coverage():
     centroid, step = medial_offsets(v, f, opts, rng)
     leaf = initial_leaves(centroid, step, 0.6, 64, opts, rng)
     n = int(leaf.max()) + 1
-    c, r = fitter.fit(leaf, n)
+    c, r, _ = fitter.fit(leaf, n)
     leaf2, c2, r2 = _rebalance(fitter, leaf, c, r, 8)
     assert len(r2) == n and len(np.unique(leaf2)) == n
     assert not np.array_equal(leaf2, leaf), "nothing moved on a tooth with flat sides and cusps"

@@ -237,9 +237,10 @@ class _LeafFitter:
         # Ties (e.g. no outside voxel at all) go to the smaller sphere.
         return cnt + self.options.gap_weight * gap / self.voxel**3 + r / (100 * r.max()), r
 
-    def best(self, pts: np.ndarray, centres: np.ndarray, bound: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """The argmin over each row of `score(pts, centres)` and its score, (L,) each, counting only what
-        can win; with `bound` (L,), only scores strictly below it count (index -1 where none is)."""
+    def best(self, pts: np.ndarray, centres: np.ndarray, bound: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The argmin over each row of `score(pts, centres)`, its score and its outside voxels
+        (`count`), (L,) each, counting only what can win; with `bound` (L,), only scores strictly
+        below it count (index -1 where none is)."""
         r, gap = _radius_and_gap(np.ascontiguousarray(pts, dtype=np.float64), np.ascontiguousarray(centres, dtype=np.float64))
         return self.band.best(centres, r, self.options.gap_weight * gap / self.voxel**3, r / (100 * r.max()), bound)
 
@@ -314,7 +315,7 @@ class _LeafFitter:
             if not len(act):
                 break
             cand = c[act, None, :] + step[act, None, None] * dirs[None, :, :]
-            j, sj = self.best(pts[act], cand, best_s[act])
+            j, sj, _ = self.best(pts[act], cand, best_s[act])
             improved = j >= 0
             moved = act[improved]
             c[moved] = cand[improved, j[improved]]
@@ -328,20 +329,26 @@ class _LeafFitter:
         cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         return np.stack([np.bincount(leaf_of_face, weights=cross[:, i], minlength=n_leaves) for i in range(3)], axis=1)
 
-    def fit_groups(self, pts: np.ndarray, normal: np.ndarray, search_rounds: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def fit_groups(self, pts: np.ndarray, normal: np.ndarray, search_rounds: int | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Fit spheres to padded weighted patch points (w, M, 4) (`patches`) with normal sums (w, 3): centres (w, 3),
-        radii (w,), mm, from candidates along each patch's inward normal, then a pattern search."""
+        radii (w,), mm, from candidates along each patch's inward normal, then a pattern search; and
+        their outside volumes (`count`), (w,)."""
         c0, r0 = enclosing_spheres(pts, iterations=60)
         n = normal / np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
         t = np.asarray(self.options.depths)
         cand = c0[:, None, :] - (r0[:, None] * t[None, :])[:, :, None] * n[:, None, :]
-        c = cand[np.arange(len(pts)), self.best(pts, cand)[0]]
+        j, _, cnt = self.best(pts, cand)
+        c = cand[np.arange(len(pts)), j]
+        if search_rounds == 0:
+            return c, radii_to_cover(pts, c), cnt
         c = self.search(pts, c, 0.25 * r0, search_rounds)
-        return c, radii_to_cover(pts, c)
+        r = radii_to_cover(pts, c)
+        return c, r, self.count(c, r)
 
     def fit(self, leaf_of_face: np.ndarray, n_leaves: int, which: np.ndarray | None = None,
-            search_rounds: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """First fit of leaves `which` (default all): centres (w, 3), radii (w,), mm (`fit_groups`)."""
+            search_rounds: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """First fit of leaves `which` (default all): centres (w, 3), radii (w,), mm, outside volumes (w,) (`fit_groups`)."""
         which = np.arange(n_leaves) if which is None else np.asarray(which)
         pts = self.patches(node_vertex_groups(self.faces, leaf_of_face, n_leaves)[which])  # (w, M, 4)
         return self.fit_groups(pts, self.normal_sums(leaf_of_face, n_leaves)[which], search_rounds)
@@ -416,7 +423,7 @@ def _split_worst(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray,
     changed = np.concatenate([worst, n + np.arange(len(worst))])
     c = np.concatenate([c, np.zeros((len(worst), 3))])
     r = np.concatenate([r, np.zeros(len(worst))])
-    c[changed], r[changed] = fitter.fit(leaf_of_face, n + len(worst), changed)
+    c[changed], r[changed], _ = fitter.fit(leaf_of_face, n + len(worst), changed)
     return leaf_of_face, c, r
 
 
@@ -479,14 +486,14 @@ def _rebalance(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray, r
     second = second_halves(centroid, leaf_of_face, in_cand >= 0)
     trial[second] = n + in_cand[leaf_of_face[second]]
     changed = np.concatenate([cand, n + np.arange(m)])
-    cs, rs = fitter.fit(trial, n + m, changed)
-    split_cost = fitter.count(cs, rs)
+    cs, rs, split_cost = fitter.fit(trial, n + m, changed)
     gain = cost[cand] - split_cost[:m] - split_cost[m:]
     groups = fitter.patches(node_vertex_groups(faces, leaf_of_face, n))
     nsum = fitter.normal_sums(leaf_of_face, n)
     merged_pts = np.concatenate([groups[pairs[:, 0]], groups[pairs[:, 1]]], axis=1)
-    cm, rm = fitter.fit_groups(merged_pts, nsum[pairs[:, 0]] + nsum[pairs[:, 1]], search_rounds=options.rebalance_merge_rounds)
-    merge_cost = fitter.count(cm, rm) - cost[pairs[:, 0]] - cost[pairs[:, 1]]
+    cm, rm, merged_cost = fitter.fit_groups(merged_pts, nsum[pairs[:, 0]] + nsum[pairs[:, 1]],
+                                            search_rounds=options.rebalance_merge_rounds)
+    merge_cost = merged_cost - cost[pairs[:, 0]] - cost[pairs[:, 1]]
     busy = np.zeros(n, dtype=bool)
     splits, merges = [], []
     mi = 0
@@ -538,8 +545,8 @@ def fit_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: 
     for pull in options.medial_pulls:
         leaf = initial_leaves(centroid, step, pull, n_leaves - reserve, options, rng)
         n = int(leaf.max()) + 1
-        c, r = fitter.fit(leaf, n)
-        total = float(fitter.count(c, r).sum())
+        c, r, cnt = fitter.fit(leaf, n)
+        total = float(cnt.sum())
         if best is None or total < best[0]:
             best = (total, leaf, c, r)
     _, leaf, c, r = best

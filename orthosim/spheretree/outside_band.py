@@ -61,7 +61,7 @@ def _count_in_spheres(prefix, origin, h, centres, radii):
 @njit(cache=True, nogil=True)
 def _best_in_groups(prefix, origin, h, centres, radii, add1, add2, bound):
     """Per group g of candidates (G, C): the first c minimising (count + add1) + add2 among those
-    strictly below bound[g], and that score; (-1, bound[g]) when none is below.
+    strictly below bound[g], that score and its count; (-1, bound[g], -1) when none is below.
 
     The same choice as counting every sphere and taking the argmin, with less counting: counts only
     grow, so a candidate's count stops, slice by slice, once its score can no longer win. Candidates
@@ -72,6 +72,7 @@ def _best_in_groups(prefix, origin, h, centres, radii, add1, add2, bound):
     g_n, c_n = radii.shape
     best_idx = np.full(g_n, -1, np.int64)
     best = bound.copy()
+    best_count = np.full(g_n, -1, np.int64)
     for g in range(g_n):
         order = np.argsort(radii[g])
         for o in range(c_n):
@@ -113,7 +114,8 @@ def _best_in_groups(prefix, origin, h, centres, radii, add1, add2, bound):
             if not lost:
                 best[g] = score
                 best_idx[g] = s
-    return best_idx, best
+                best_count[g] = total
+    return best_idx, best, best_count
 
 
 class OutsideBand:
@@ -149,11 +151,11 @@ class OutsideBand:
         return _count_in_spheres(self.prefix, self.origin, self.voxel, centres, radii)
 
     def best(self, centres: np.ndarray, radii: np.ndarray, add1: np.ndarray, add2: np.ndarray,
-             bound: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Per group of candidate spheres, centres (G, C, 3) and radii (G, C) mm: the index and score
-        of the first minimiser of (count + add1) + add2 ((G, C) each) strictly below `bound` (G,)
-        (default: no bound); index -1 and the bound where none is below. As `count` and an argmin,
-        without counting the candidates that cannot win to the end."""
+             bound: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per group of candidate spheres, centres (G, C, 3) and radii (G, C) mm: the index, score and
+        count of the first minimiser of (count + add1) + add2 ((G, C) each) strictly below `bound`
+        (G,) (default: no bound); index -1, the bound and count -1 where none is below. As `count`
+        and an argmin, without counting the candidates that cannot win to the end."""
         g_n, c_n = np.shape(radii)
         bound = np.full(g_n, np.inf) if bound is None else np.ascontiguousarray(bound, dtype=np.float64)
         return _best_in_groups(self.prefix, self.origin, self.voxel,
