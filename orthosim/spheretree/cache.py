@@ -36,7 +36,7 @@ from .tree import SphereTree
 
 BUILDER_VERSION = 10
 # Modules whose code decides what a built tree holds: their source is part of the key.
-_BUILDER_MODULES = ("build", "fit", "octree", "enclose", "outside_band", "inside", "tree")
+_BUILDER_MODULES = ("build", "fit", "octree", "enclose", "outside_band", "inside", "measure", "tree")
 _PACKAGE = Path(__file__).resolve().parent
 
 
