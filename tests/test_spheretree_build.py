@@ -150,6 +150,39 @@ def test_outside_band_counts_exactly_the_weighted_voxels_inside_each_sphere():
     np.testing.assert_array_equal(band.count(c, r), expected)
 
 
+def test_best_candidate_is_the_argmin_of_the_full_count_with_and_without_a_bound():
+    """`OutsideBand.best` stops counting the candidates that cannot win: it must still pick the first
+    minimiser of (count + add1) + add2, with its score and count, and honour a strict bound."""
+    from orthosim.spheretree.outside_band import OutsideBand
+
+    mesh = trimesh.creation.capsule(height=6.0, radius=2.0, count=[24, 24])
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces, np.int64)
+    band = OutsideBand(v, f, voxel_mm=0.15, max_voxels=4_000_000, band_mm=0.75, fine_mm=0.3)
+    rng = np.random.default_rng(5)
+    g, k = 300, 7
+    c = v[rng.integers(len(v), size=g)][:, None, :] + rng.normal(scale=0.8, size=(g, k, 3))
+    r = rng.uniform(0.2, 3.0, (g, k))
+    add1 = rng.uniform(0, 200, (g, k))
+    add2 = rng.uniform(0, 1, (g, k))
+    add1[:20] = 0.0  # ties: equal scores must go to the first candidate, as argmin does
+    add2[:20] = 0.0
+    r[:20] = 0.05  # spheres too small to hold any voxel
+    cnt = band.count(c.reshape(-1, 3), r.ravel()).reshape(g, k)
+    score = (cnt + add1) + add2
+    idx, best, count = band.best(c, r, add1, add2)
+    np.testing.assert_array_equal(idx, score.argmin(axis=1))
+    np.testing.assert_array_equal(best, score.min(axis=1))
+    np.testing.assert_array_equal(count, cnt[np.arange(g), idx])
+    bound = np.median(score, axis=1)
+    bound[:5] = score[:5].min(axis=1)  # strictly below: nothing qualifies
+    idx, best, count = band.best(c, r, add1, add2, bound)
+    below = score < bound[:, None]
+    expect = np.where(below.any(axis=1), np.where(below, score, np.inf).argmin(axis=1), -1)
+    np.testing.assert_array_equal(idx, expect)
+    assert (idx[:5] == -1).all() and (count[:5] == -1).all()
+    np.testing.assert_array_equal(best, np.where(expect >= 0, score.min(axis=1), bound))
+
+
 def test_fine_meshes_are_scored_on_finer_voxels_and_coarse_ones_keep_the_default():
     from orthosim.spheretree.fit import FitOptions, voxel_spacing
 
