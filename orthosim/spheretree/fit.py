@@ -22,6 +22,8 @@ medial axis holds both sides at once. So:
    holds it, so the sphere it leaves can shrink); the triangles that set a leaf's radius are
    handed to a neighbour that grows to take them when that lowers the outside volume; the
    spheres are searched again. Every radius is recomputed from its patch, so coverage stays exact.
+   A thin tooth whose finished tree is still loose by this count is built again whole with a
+   stronger pull (`FitOptions.thin_pulls`), and the tighter of the two trees kept.
 4. Group the leaves top-down into nodes of at most `branching` children (k-means with capacity);
    each inner node is the near-minimal sphere around all vertices of its triangles, so it holds
    everything its children hold and a descent never loses a contact.
