@@ -159,6 +159,23 @@ def test_a_tooth_and_its_mirror_image_share_one_cache_entry(tmp_path):
     np.testing.assert_array_equal(left.leaf_radii, right.leaf_radii)
 
 
+def test_which_of_a_mirror_pair_is_built_does_not_follow_the_builder_source(monkeypatch):
+    from orthosim.spheretree import cache
+
+    # an edit of the builder rebuilds the trees, but for the same side of each pair: a tree's mirror
+    # is not the tree its mirror image would get, so a swap would change every picture of that pair
+    mesh = trimesh.creation.capsule(height=8.0, radius=2.5, count=[20, 20])
+    pairs = [((mesh.vertices + [dx, 0.3, 0.0]), mesh.faces) for dx in (-2.0, -1.0, 0.5, 1.5, 2.5)]
+    sides = []
+    for digest in ("0" * 64, "f" * 64):
+        monkeypatch.setattr(cache, "builder_source_digest", lambda d=digest: d)
+        sides.append([(cache._entry((v, f), "fit", 8, 4, Path(".")).flip,
+                       cache._entry((v * [-1, 1, 1], f[:, ::-1]), "fit", 8, 4, Path(".")).flip) for v, f in pairs])
+    assert sides[0] == sides[1]
+    assert all(a != b for a, b in sides[0])  # one of each pair is stored, the other is its mirror
+    assert len({flip for flip, _ in sides[0]}) == 2  # and the side follows the mesh, not a fixed rule
+
+
 def test_many_trees_at_once_build_in_parallel_each_distinct_mesh_once(tmp_path):
     """A dentition's trees: parallel builds give the very trees one process gives, in the given order,
     a mirror pair is built once, and the progress callback counts every mesh once."""

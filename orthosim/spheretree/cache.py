@@ -112,13 +112,21 @@ class _Entry:
     mesh: tuple[np.ndarray, np.ndarray]  # the mesh the stored tree was (or is to be) built for
 
 
+def _side_key(vertices: np.ndarray, faces: np.ndarray) -> str:
+    """Which of a mesh and its mirror image a shared tree is built for: the one whose content digest
+    is smaller. Content only, never the builder's version or source, so that editing the builder
+    never swaps a pair's sides (a tree's mirror is not the tree its mirror image would get)."""
+    h = hashlib.sha256(np.ascontiguousarray(vertices, dtype=np.float64).tobytes())
+    h.update(np.ascontiguousarray(faces, dtype=np.int64).tobytes())
+    return h.hexdigest()
+
+
 def _entry(mesh, method: str, branching: int, depth: int, folder: Path) -> _Entry:
     vertices, faces = mesh_arrays(mesh)
-    key = cache_key(vertices, faces, method, branching, depth)
     mirrored = mirror_mesh(vertices, faces)
-    mirror_key = cache_key(*mirrored, method, branching, depth)
-    flip = mirror_key < key
-    return _Entry(folder / f"{min(key, mirror_key)}.npz", flip, mirrored if flip else (vertices, faces))
+    flip = _side_key(*mirrored) < _side_key(vertices, faces)
+    stored = mirrored if flip else (vertices, faces)
+    return _Entry(folder / f"{cache_key(*stored, method, branching, depth)}.npz", flip, stored)
 
 
 class DamagedCacheWarning(UserWarning):
