@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import trimesh
@@ -105,6 +107,34 @@ def test_cache_key_follows_mesh_and_request(tmp_path):
     assert base != cache_key(moved, f, "fit", 8, 4)
 
 
+def test_cache_key_follows_the_builder_source(monkeypatch):
+    """An edited builder must never be served a tree its older self stored."""
+    from orthosim.spheretree import cache
+
+    mesh = _mesh()
+    base = cache_key(mesh.vertices, mesh.faces, "fit", 8, 4)
+    monkeypatch.setattr(cache, "builder_source_digest", lambda: "0" * 64)
+    assert cache_key(mesh.vertices, mesh.faces, "fit", 8, 4) != base
+
+
+def test_every_module_the_tree_builders_import_is_part_of_the_cache_key():
+    """Every spheretree module a keyed builder module imports (at any depth) is keyed too, and the
+    digest reads the files' current text."""
+    import ast
+
+    from orthosim.spheretree import cache
+
+    package = Path(cache.__file__).resolve().parent
+    keyed = set(cache._BUILDER_MODULES)
+    missing = set()
+    for name in keyed:
+        for node in ast.walk(ast.parse((package / f"{name}.py").read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module and node.module not in keyed:
+                missing.add(f"{name} imports {node.module}")
+    assert not missing, sorted(missing)
+    assert {"build", "fit", "octree"} <= keyed
+
+
 def test_damaged_cache_entry_is_rebuilt(tmp_path):
     mesh = _mesh()
     tree = cached_sphere_tree(mesh, cache_dir=tmp_path)
@@ -127,6 +157,23 @@ def test_a_tooth_and_its_mirror_image_share_one_cache_entry(tmp_path):
     left.validate(v * [-1, 1, 1], f[:, ::-1])
     np.testing.assert_array_equal(left.leaf_centers, right.leaf_centers * [-1, 1, 1])
     np.testing.assert_array_equal(left.leaf_radii, right.leaf_radii)
+
+
+def test_which_of_a_mirror_pair_is_built_does_not_follow_the_builder_source(monkeypatch):
+    from orthosim.spheretree import cache
+
+    # an edit of the builder rebuilds the trees, but for the same side of each pair: a tree's mirror
+    # is not the tree its mirror image would get, so a swap would change every picture of that pair
+    mesh = trimesh.creation.capsule(height=8.0, radius=2.5, count=[20, 20])
+    pairs = [((mesh.vertices + [dx, 0.3, 0.0]), mesh.faces) for dx in (-2.0, -1.0, 0.5, 1.5, 2.5)]
+    sides = []
+    for digest in ("0" * 64, "f" * 64):
+        monkeypatch.setattr(cache, "builder_source_digest", lambda d=digest: d)
+        sides.append([(cache._entry((v, f), "fit", 8, 4, Path(".")).flip,
+                       cache._entry((v * [-1, 1, 1], f[:, ::-1]), "fit", 8, 4, Path(".")).flip) for v, f in pairs])
+    assert sides[0] == sides[1]
+    assert all(a != b for a, b in sides[0])  # one of each pair is stored, the other is its mirror
+    assert len({flip for flip, _ in sides[0]}) == 2  # and the side follows the mesh, not a fixed rule
 
 
 def test_many_trees_at_once_build_in_parallel_each_distinct_mesh_once(tmp_path):

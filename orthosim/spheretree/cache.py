@@ -1,10 +1,12 @@
 """On-disk cache of sphere trees, keyed by the mesh's content and the build request.
 
 A tree depends only on the mesh's vertices and faces, the method, branching, depth and the builder's
-code, so the key is a SHA-256 of exactly those (plus `BUILDER_VERSION`, bumped whenever a builder
-changes its output). A hit loads one small .npz in milliseconds; a miss builds and writes the file
-atomically, so two processes racing on the same tree both end with a whole file. The folder is
-`$ORTHOSIM_CACHE` if set, else `~/.cache/orthosim/spheretrees`.
+code, so the key is a SHA-256 of exactly those: the source text of the modules that build trees
+(`_BUILDER_MODULES`) enters the key, so an edited builder never serves a tree an older one stored,
+and `BUILDER_VERSION` is bumped as well whenever a builder changes its output on purpose. A hit
+loads one small .npz in milliseconds; a miss builds and writes the file atomically, so two
+processes racing on the same tree both end with a whole file. The folder is `$ORTHOSIM_CACHE` if
+set, else `~/.cache/orthosim/spheretrees`.
 
 Left and right teeth are mirror images (x -> -x in the local frame, see `orthosim.tooth`), and a
 mirror maps a conservative tree to a conservative tree exactly (negating a float is exact), so a
@@ -15,6 +17,7 @@ and `cached_sphere_trees` spreads those builds over the machine's cores (one pro
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import multiprocessing
 import os
@@ -31,7 +34,20 @@ from ..lifeline import exit_with_parent
 from .build import build_sphere_tree, check_request, mesh_arrays
 from .tree import SphereTree
 
-BUILDER_VERSION = 9
+BUILDER_VERSION = 10
+# Modules whose code decides what a built tree holds: their source is part of the key.
+_BUILDER_MODULES = ("build", "fit", "octree", "enclose", "outside_band", "inside", "measure", "tree")
+_PACKAGE = Path(__file__).resolve().parent
+
+
+@functools.cache
+def builder_source_digest() -> str:
+    """Hex SHA-256 of the source text of the tree-building modules (read once a process)."""
+    h = hashlib.sha256()
+    for name in _BUILDER_MODULES:
+        h.update(name.encode())
+        h.update((_PACKAGE / f"{name}.py").read_bytes())
+    return h.hexdigest()
 
 
 def default_cache_dir() -> Path:
@@ -40,11 +56,12 @@ def default_cache_dir() -> Path:
 
 
 def cache_key(vertices: np.ndarray, faces: np.ndarray, method: str, branching: int, depth: int) -> str:
-    """Hex SHA-256 of the mesh's bytes (float64 vertices, int64 faces) and the build request."""
+    """Hex SHA-256 of the mesh's bytes (float64 vertices, int64 faces), the build request and the
+    builder (version and source, `builder_source_digest`)."""
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(vertices, dtype=np.float64).tobytes())
     h.update(np.ascontiguousarray(faces, dtype=np.int64).tobytes())
-    h.update(f"|{method}|{branching}|{depth}|v{BUILDER_VERSION}|{len(vertices)}|{len(faces)}".encode())
+    h.update(f"|{method}|{branching}|{depth}|v{BUILDER_VERSION}|{builder_source_digest()}|{len(vertices)}|{len(faces)}".encode())
     return h.hexdigest()
 
 
@@ -95,13 +112,21 @@ class _Entry:
     mesh: tuple[np.ndarray, np.ndarray]  # the mesh the stored tree was (or is to be) built for
 
 
+def _side_key(vertices: np.ndarray, faces: np.ndarray) -> str:
+    """Which of a mesh and its mirror image a shared tree is built for: the one whose content digest
+    is smaller. Content only, never the builder's version or source, so that editing the builder
+    never swaps a pair's sides (a tree's mirror is not the tree its mirror image would get)."""
+    h = hashlib.sha256(np.ascontiguousarray(vertices, dtype=np.float64).tobytes())
+    h.update(np.ascontiguousarray(faces, dtype=np.int64).tobytes())
+    return h.hexdigest()
+
+
 def _entry(mesh, method: str, branching: int, depth: int, folder: Path) -> _Entry:
     vertices, faces = mesh_arrays(mesh)
-    key = cache_key(vertices, faces, method, branching, depth)
     mirrored = mirror_mesh(vertices, faces)
-    mirror_key = cache_key(*mirrored, method, branching, depth)
-    flip = mirror_key < key
-    return _Entry(folder / f"{min(key, mirror_key)}.npz", flip, mirrored if flip else (vertices, faces))
+    flip = _side_key(*mirrored) < _side_key(vertices, faces)
+    stored = mirrored if flip else (vertices, faces)
+    return _Entry(folder / f"{cache_key(*stored, method, branching, depth)}.npz", flip, stored)
 
 
 class DamagedCacheWarning(UserWarning):

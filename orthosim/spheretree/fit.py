@@ -22,6 +22,8 @@ medial axis holds both sides at once. So:
    holds it, so the sphere it leaves can shrink); the triangles that set a leaf's radius are
    handed to a neighbour that grows to take them when that lowers the outside volume; the
    spheres are searched again. Every radius is recomputed from its patch, so coverage stays exact.
+   A thin tooth whose finished tree is still loose by this count is built again whole with a
+   stronger pull (`FitOptions.thin_pulls`), and the tighter of the two trees kept.
 4. Group the leaves top-down into nodes of at most `branching` children (k-means with capacity);
    each inner node is the near-minimal sphere around all vertices of its triangles, so it holds
    everything its children hold and a descent never loses a contact.
@@ -38,6 +40,7 @@ from numba import njit
 from scipy.spatial import cKDTree
 
 from .enclose import enclosing_spheres, node_vertex_groups, radii_to_cover, radii_to_cover_each
+from .measure import mesh_volume
 from .outside_band import OutsideBand
 from .tree import SphereTree
 
@@ -47,6 +50,12 @@ class FitOptions:
     """Knobs of the optimising builder (defaults tuned on the parametric and real teeth)."""
 
     medial_pulls: tuple[float, ...] = (0.7,)  # pulls tried by fit_leaves (the best first fit wins)
+    # A thin tooth (median rho under thin_rho_mm) whose finished tree holds more than thin_retry_sov
+    # of the tooth's volume outside, by the builder's count, is built again whole with thin_pulls
+    # and the tighter tree kept (real lower incisors: 0.75 -> 0.61 on one, the others keep theirs).
+    thin_pulls: tuple[float, ...] = (0.9,)
+    thin_rho_mm: float = 1.2
+    thin_retry_sov: float = 0.06
     medial_cap_mm: float = 4.0  # rho capped at this depth, mm
     medial_samples: int = 4000  # faces on which rho is estimated
     lloyd_iterations: int = 12
@@ -237,6 +246,13 @@ class _LeafFitter:
         # Ties (e.g. no outside voxel at all) go to the smaller sphere.
         return cnt + self.options.gap_weight * gap / self.voxel**3 + r / (100 * r.max()), r
 
+    def best(self, pts: np.ndarray, centres: np.ndarray, bound: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The argmin over each row of `score(pts, centres)`, its score and its outside voxels
+        (`count`), (L,) each, counting only what can win; with `bound` (L,), only scores strictly
+        below it count (index -1 where none is)."""
+        r, gap = _radius_and_gap(np.ascontiguousarray(pts, dtype=np.float64), np.ascontiguousarray(centres, dtype=np.float64))
+        return self.band.best(centres, r, self.options.gap_weight * gap / self.voxel**3, r / (100 * r.max()), bound)
+
     def handoff(self, leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray, k: int = 6) -> np.ndarray:
         """Hand the triangles that set a leaf's radius to a neighbour that may grow, where that pays.
 
@@ -308,10 +324,8 @@ class _LeafFitter:
             if not len(act):
                 break
             cand = c[act, None, :] + step[act, None, None] * dirs[None, :, :]
-            s, _ = self.score(pts[act], cand)
-            j = s.argmin(axis=1)
-            sj = s[np.arange(len(act)), j]
-            improved = sj < best_s[act]
+            j, sj, _ = self.best(pts[act], cand, best_s[act])
+            improved = j >= 0
             moved = act[improved]
             c[moved] = cand[improved, j[improved]]
             best_s[moved] = sj[improved]
@@ -324,21 +338,26 @@ class _LeafFitter:
         cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         return np.stack([np.bincount(leaf_of_face, weights=cross[:, i], minlength=n_leaves) for i in range(3)], axis=1)
 
-    def fit_groups(self, pts: np.ndarray, normal: np.ndarray, search_rounds: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def fit_groups(self, pts: np.ndarray, normal: np.ndarray, search_rounds: int | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Fit spheres to padded weighted patch points (w, M, 4) (`patches`) with normal sums (w, 3): centres (w, 3),
-        radii (w,), mm, from candidates along each patch's inward normal, then a pattern search."""
+        radii (w,), mm, from candidates along each patch's inward normal, then a pattern search; and
+        their outside volumes (`count`), (w,)."""
         c0, r0 = enclosing_spheres(pts, iterations=60)
         n = normal / np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
         t = np.asarray(self.options.depths)
         cand = c0[:, None, :] - (r0[:, None] * t[None, :])[:, :, None] * n[:, None, :]
-        s, _ = self.score(pts, cand)
-        c = cand[np.arange(len(pts)), s.argmin(axis=1)]
+        j, _, cnt = self.best(pts, cand)
+        c = cand[np.arange(len(pts)), j]
+        if search_rounds == 0:
+            return c, radii_to_cover(pts, c), cnt
         c = self.search(pts, c, 0.25 * r0, search_rounds)
-        return c, radii_to_cover(pts, c)
+        r = radii_to_cover(pts, c)
+        return c, r, self.count(c, r)
 
     def fit(self, leaf_of_face: np.ndarray, n_leaves: int, which: np.ndarray | None = None,
-            search_rounds: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """First fit of leaves `which` (default all): centres (w, 3), radii (w,), mm (`fit_groups`)."""
+            search_rounds: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """First fit of leaves `which` (default all): centres (w, 3), radii (w,), mm, outside volumes (w,) (`fit_groups`)."""
         which = np.arange(n_leaves) if which is None else np.asarray(which)
         pts = self.patches(node_vertex_groups(self.faces, leaf_of_face, n_leaves)[which])  # (w, M, 4)
         return self.fit_groups(pts, self.normal_sums(leaf_of_face, n_leaves)[which], search_rounds)
@@ -413,7 +432,7 @@ def _split_worst(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray,
     changed = np.concatenate([worst, n + np.arange(len(worst))])
     c = np.concatenate([c, np.zeros((len(worst), 3))])
     r = np.concatenate([r, np.zeros(len(worst))])
-    c[changed], r[changed] = fitter.fit(leaf_of_face, n + len(worst), changed)
+    c[changed], r[changed], _ = fitter.fit(leaf_of_face, n + len(worst), changed)
     return leaf_of_face, c, r
 
 
@@ -476,14 +495,14 @@ def _rebalance(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray, r
     second = second_halves(centroid, leaf_of_face, in_cand >= 0)
     trial[second] = n + in_cand[leaf_of_face[second]]
     changed = np.concatenate([cand, n + np.arange(m)])
-    cs, rs = fitter.fit(trial, n + m, changed)
-    split_cost = fitter.count(cs, rs)
+    cs, rs, split_cost = fitter.fit(trial, n + m, changed)
     gain = cost[cand] - split_cost[:m] - split_cost[m:]
     groups = fitter.patches(node_vertex_groups(faces, leaf_of_face, n))
     nsum = fitter.normal_sums(leaf_of_face, n)
     merged_pts = np.concatenate([groups[pairs[:, 0]], groups[pairs[:, 1]]], axis=1)
-    cm, rm = fitter.fit_groups(merged_pts, nsum[pairs[:, 0]] + nsum[pairs[:, 1]], search_rounds=options.rebalance_merge_rounds)
-    merge_cost = fitter.count(cm, rm) - cost[pairs[:, 0]] - cost[pairs[:, 1]]
+    cm, rm, merged_cost = fitter.fit_groups(merged_pts, nsum[pairs[:, 0]] + nsum[pairs[:, 1]],
+                                            search_rounds=options.rebalance_merge_rounds)
+    merge_cost = merged_cost - cost[pairs[:, 0]] - cost[pairs[:, 1]]
     busy = np.zeros(n, dtype=bool)
     splits, merges = [], []
     mi = 0
@@ -523,23 +542,10 @@ def _rebalance(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray, r
     return out, c, r
 
 
-def fit_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: FitOptions, rng):
-    """At most n_leaves leaf spheres with the least outside volume: (F,) leaf of each face,
-    centres (L, 3) mm, radii (L,) mm."""
-    fitter = _LeafFitter(vertices, faces, options)
-    reserve = int(round(n_leaves * options.reserve)) if n_leaves >= 32 else 0
-    # The best pull toward the medial axis depends on the tooth (thin incisors, thick molars):
-    # fit each candidate pull once and improve only the partition with the least outside volume.
-    best = None
-    centroid, step = medial_offsets(vertices, faces, options, rng)
-    for pull in options.medial_pulls:
-        leaf = initial_leaves(centroid, step, pull, n_leaves - reserve, options, rng)
-        n = int(leaf.max()) + 1
-        c, r = fitter.fit(leaf, n)
-        total = float(fitter.count(c, r).sum())
-        if best is None or total < best[0]:
-            best = (total, leaf, c, r)
-    _, leaf, c, r = best
+def _improve(fitter: "_LeafFitter", leaf: np.ndarray, c: np.ndarray, r: np.ndarray, n_leaves: int, rng):
+    """The improve rounds (module text, step 3) from a first fit: (F,) leaf of each face, centres
+    (L, 3) mm, radii (L,) mm, L <= n_leaves."""
+    vertices, faces, options = fitter.vertices, fitter.faces, fitter.options
     for _ in range(options.reassign_rounds):
         if len(r) < n_leaves:
             leaf, c, r = _split_worst(fitter, leaf, c, r, n_leaves - len(r), rng)
@@ -559,6 +565,37 @@ def fit_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: 
         leaf, c, r = _split_worst(fitter, leaf, c, r, n_leaves - len(r), rng)
         leaf, c, r = _compact(leaf, c, r)
     return leaf, c, r
+
+
+def fit_leaves(vertices: np.ndarray, faces: np.ndarray, n_leaves: int, options: FitOptions, rng):
+    """At most n_leaves leaf spheres with the least outside volume: (F,) leaf of each face,
+    centres (L, 3) mm, radii (L,) mm."""
+    fitter = _LeafFitter(vertices, faces, options)
+    reserve = int(round(n_leaves * options.reserve)) if n_leaves >= 32 else 0
+    centroid, step = medial_offsets(vertices, faces, options, rng)
+
+    def first_fit(pulls):
+        # The best pull toward the medial axis depends on the tooth (thin incisors, thick molars):
+        # fit each candidate pull once and keep the partition with the least outside volume.
+        best = None
+        for pull in pulls:
+            leaf = initial_leaves(centroid, step, pull, n_leaves - reserve, options, rng)
+            c, r, cnt = fitter.fit(leaf, int(leaf.max()) + 1)
+            if best is None or cnt.sum() < best[0]:
+                best = (cnt.sum(), leaf, c, r)
+        return best[1:]
+
+    leaf, c, r = _improve(fitter, *first_fit(options.medial_pulls), n_leaves, rng)
+    if not options.thin_pulls or np.median(np.linalg.norm(step, axis=1)) >= options.thin_rho_mm:
+        return leaf, c, r
+    # A thin tooth (both sides of the crown and root within reach of one sphere) may fit far better
+    # with a stronger pull, which the first fit does not foresee: where the finished tree is loose
+    # by the builder's own count, build it again whole with the thin pulls and keep the tighter.
+    total = float(fitter.count(c, r).sum())
+    if total * fitter.voxel**3 <= options.thin_retry_sov * abs(mesh_volume(vertices, faces)):
+        return leaf, c, r
+    other = _improve(fitter, *first_fit(options.thin_pulls), n_leaves, rng)
+    return other if float(fitter.count(other[1], other[2]).sum()) < total else (leaf, c, r)
 
 
 def group_leaves(positions: np.ndarray, branching: int, depth: int, rng) -> list[np.ndarray]:

@@ -58,6 +58,66 @@ def _count_in_spheres(prefix, origin, h, centres, radii):
     return out
 
 
+@njit(cache=True, nogil=True)
+def _best_in_groups(prefix, origin, h, centres, radii, add1, add2, bound):
+    """Per group g of candidates (G, C): the first c minimising (count + add1) + add2 among those
+    strictly below bound[g], that score and its count; (-1, bound[g], -1) when none is below.
+
+    The same choice as counting every sphere and taking the argmin, with less counting: counts only
+    grow, so a candidate's count stops, slice by slice, once its score can no longer win. Candidates
+    are tried smallest first (small spheres are cheap and usually good, and set a tight bound).
+    """
+    nx, ny, nzp = prefix.shape
+    nz = nzp - 1
+    g_n, c_n = radii.shape
+    best_idx = np.full(g_n, -1, np.int64)
+    best = bound.copy()
+    best_count = np.full(g_n, -1, np.int64)
+    for g in range(g_n):
+        order = np.argsort(radii[g])
+        for o in range(c_n):
+            s = order[o]
+            cx, cy, cz, r = centres[g, s, 0], centres[g, s, 1], centres[g, s, 2], radii[g, s]
+            a1, a2 = add1[g, s], add2[g, s]
+            if not r >= 0.0:
+                continue
+            score = (0.0 + a1) + a2
+            if score > best[g] or (score == best[g] and s > best_idx[g]):
+                continue
+            r2 = r * r
+            i0 = max(int(np.ceil((cx - r - origin[0]) / h)), 0)
+            i1 = min(int(np.floor((cx + r - origin[0]) / h)), nx - 1)
+            total = 0
+            lost = False
+            for i in range(i0, i1 + 1):
+                dx = origin[0] + h * i - cx
+                rx = r2 - dx * dx
+                if rx < 0.0:
+                    continue
+                ry = np.sqrt(rx)
+                j0 = max(int(np.ceil((cy - ry - origin[1]) / h)), 0)
+                j1 = min(int(np.floor((cy + ry - origin[1]) / h)), ny - 1)
+                for j in range(j0, j1 + 1):
+                    dy = origin[1] + h * j - cy
+                    rz = rx - dy * dy
+                    if rz < 0.0:
+                        continue
+                    half = np.sqrt(rz)
+                    k0 = max(int(np.ceil((cz - half - origin[2]) / h)), 0)
+                    k1 = min(int(np.floor((cz + half - origin[2]) / h)), nz - 1)
+                    if k1 >= k0:
+                        total += prefix[i, j, k1 + 1] - prefix[i, j, k0]
+                score = (float(total) + a1) + a2
+                if score > best[g] or (score == best[g] and s > best_idx[g]):
+                    lost = True
+                    break
+            if not lost:
+                best[g] = score
+                best_idx[g] = s
+                best_count[g] = total
+    return best_idx, best, best_count
+
+
 class OutsideBand:
     """The outside band of a closed mesh ((n, 3) float64 mm, (m, 3) int) as a counting grid.
 
@@ -89,3 +149,17 @@ class OutsideBand:
         centres = np.ascontiguousarray(centres, dtype=np.float64).reshape(-1, 3)
         radii = np.ascontiguousarray(radii, dtype=np.float64).ravel()
         return _count_in_spheres(self.prefix, self.origin, self.voxel, centres, radii)
+
+    def best(self, centres: np.ndarray, radii: np.ndarray, add1: np.ndarray, add2: np.ndarray,
+             bound: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per group of candidate spheres, centres (G, C, 3) and radii (G, C) mm: the index, score and
+        count of the first minimiser of (count + add1) + add2 ((G, C) each) strictly below `bound`
+        (G,) (default: no bound); index -1, the bound and count -1 where none is below. As `count`
+        and an argmin, without counting the candidates that cannot win to the end."""
+        g_n, c_n = np.shape(radii)
+        bound = np.full(g_n, np.inf) if bound is None else np.ascontiguousarray(bound, dtype=np.float64)
+        return _best_in_groups(self.prefix, self.origin, self.voxel,
+                               np.ascontiguousarray(centres, dtype=np.float64).reshape(g_n, c_n, 3),
+                               np.ascontiguousarray(radii, dtype=np.float64),
+                               np.ascontiguousarray(add1, dtype=np.float64), np.ascontiguousarray(add2, dtype=np.float64),
+                               bound)
