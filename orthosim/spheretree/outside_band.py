@@ -22,11 +22,32 @@ from scipy import ndimage
 from .inside import CrossingIndex
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _slice_weight(prefix, origin, h, cy, cz, rx, i):
+    """Weight of band voxels in x slice i inside a sphere centred at (., cy, cz) whose squared radius
+    in that slice is rx >= 0: one running-sum subtraction per (x, y) column it crosses."""
+    ny, nz = prefix.shape[1], prefix.shape[2] - 1
+    ry = np.sqrt(rx)
+    j0 = max(int(np.ceil((cy - ry - origin[1]) / h)), 0)
+    j1 = min(int(np.floor((cy + ry - origin[1]) / h)), ny - 1)
+    total = 0
+    for j in range(j0, j1 + 1):
+        dy = origin[1] + h * j - cy
+        rz = rx - dy * dy
+        if rz < 0.0:
+            continue
+        half = np.sqrt(rz)
+        k0 = max(int(np.ceil((cz - half - origin[2]) / h)), 0)
+        k1 = min(int(np.floor((cz + half - origin[2]) / h)), nz - 1)
+        if k1 >= k0:
+            total += prefix[i, j, k1 + 1] - prefix[i, j, k0]
+    return total
+
+
 @njit(cache=True, nogil=True)
 def _count_in_spheres(prefix, origin, h, centres, radii):
     """Weight of band voxels inside each sphere: (n,) int64, from (nx, ny, nz + 1) running sums."""
-    nx, ny, nzp = prefix.shape
-    nz = nzp - 1
+    nx = prefix.shape[0]
     out = np.zeros(len(radii), np.int64)
     for s in range(len(radii)):
         cx, cy, cz, r = centres[s, 0], centres[s, 1], centres[s, 2], radii[s]
@@ -39,21 +60,8 @@ def _count_in_spheres(prefix, origin, h, centres, radii):
         for i in range(i0, i1 + 1):
             dx = origin[0] + h * i - cx
             rx = r2 - dx * dx
-            if rx < 0.0:
-                continue
-            ry = np.sqrt(rx)  # the columns of this slice that the sphere crosses
-            j0 = max(int(np.ceil((cy - ry - origin[1]) / h)), 0)
-            j1 = min(int(np.floor((cy + ry - origin[1]) / h)), ny - 1)
-            for j in range(j0, j1 + 1):
-                dy = origin[1] + h * j - cy
-                rz = rx - dy * dy
-                if rz < 0.0:
-                    continue
-                half = np.sqrt(rz)
-                k0 = max(int(np.ceil((cz - half - origin[2]) / h)), 0)
-                k1 = min(int(np.floor((cz + half - origin[2]) / h)), nz - 1)
-                if k1 >= k0:
-                    total += prefix[i, j, k1 + 1] - prefix[i, j, k0]
+            if rx >= 0.0:
+                total += _slice_weight(prefix, origin, h, cy, cz, rx, i)
         out[s] = total
     return out
 
@@ -67,8 +75,7 @@ def _best_in_groups(prefix, origin, h, centres, radii, add1, add2, bound):
     grow, so a candidate's count stops, slice by slice, once its score can no longer win. Candidates
     are tried smallest first (small spheres are cheap and usually good, and set a tight bound).
     """
-    nx, ny, nzp = prefix.shape
-    nz = nzp - 1
+    nx = prefix.shape[0]
     g_n, c_n = radii.shape
     best_idx = np.full(g_n, -1, np.int64)
     best = bound.copy()
@@ -94,19 +101,7 @@ def _best_in_groups(prefix, origin, h, centres, radii, add1, add2, bound):
                 rx = r2 - dx * dx
                 if rx < 0.0:
                     continue
-                ry = np.sqrt(rx)
-                j0 = max(int(np.ceil((cy - ry - origin[1]) / h)), 0)
-                j1 = min(int(np.floor((cy + ry - origin[1]) / h)), ny - 1)
-                for j in range(j0, j1 + 1):
-                    dy = origin[1] + h * j - cy
-                    rz = rx - dy * dy
-                    if rz < 0.0:
-                        continue
-                    half = np.sqrt(rz)
-                    k0 = max(int(np.ceil((cz - half - origin[2]) / h)), 0)
-                    k1 = min(int(np.floor((cz + half - origin[2]) / h)), nz - 1)
-                    if k1 >= k0:
-                        total += prefix[i, j, k1 + 1] - prefix[i, j, k0]
+                total += _slice_weight(prefix, origin, h, cy, cz, rx, i)
                 score = (float(total) + a1) + a2
                 if score > best[g] or (score == best[g] and s > best_idx[g]):
                     lost = True
