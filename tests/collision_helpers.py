@@ -8,7 +8,6 @@ vertex distance as radius, so it holds every face below it.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import trimesh

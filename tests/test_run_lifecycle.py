@@ -2,7 +2,6 @@
 SIGKILL in the middle of a rendered run, a disk that fills up; never a mixed folder, never a
 process left behind."""
 
-import json
 import os
 import signal
 import subprocess

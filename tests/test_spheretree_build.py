@@ -6,7 +6,6 @@ contact below it, and an overlapping leaf pair is where the teeth touch.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest

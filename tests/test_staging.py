@@ -8,7 +8,6 @@ from __future__ import annotations
 import itertools
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,7 +20,7 @@ from orthosim.parametric import parametric_dentition
 from orthosim.staging.commands import plan_case
 from orthosim.staging.limits import StageLimits
 from orthosim.staging.plan import plan_staging
-from orthosim.staging.target import ToothMovement, movement_components, target_poses, target_pose
+from orthosim.staging.target import ToothMovement, movement_components, target_pose
 
 DISTALISATION = CASES_DIR / "staging_molar_distalisation.toml"
 

@@ -25,7 +25,6 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .. import fdi as F
 from ..errors import CaseError
 
 COMPONENTS = ("mesial", "buccal", "extrusion", "tip", "torque", "rotation")  # chart and limit order
