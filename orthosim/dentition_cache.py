@@ -29,11 +29,13 @@ from typing import Callable, Iterable, Mapping
 import numpy as np
 
 from .atomic import atomic_path
+from .sourcedigest import source_digest
 
 BUILDER_VERSION = 1
 # Modules whose code decides what a built dentition holds: their source is part of the key.
 _BUILDER_MODULES = ("anatomy", "archform", "dentition", "fdi", "interpenetration", "meshload", "meshrefine", "occlusion",
-                    "openfulljaw", "parametric", "scanfolders", "scanframe", "tooth", "toothshape", "geometry/meshquery")
+                    "openfulljaw", "parametric", "scanfolders", "scanframe", "tooth", "toothshape", "geometry/meshquery",
+                    "geometry/penetration")
 _PACKAGE = Path(__file__).resolve().parent
 
 
@@ -47,11 +49,7 @@ def default_cache_dir() -> Path:
 
 
 def _builder_source_digest() -> str:
-    h = hashlib.sha256()
-    for name in _BUILDER_MODULES:
-        h.update(name.encode())
-        h.update((_PACKAGE / f"{name}.py").read_bytes())
-    return h.hexdigest()
+    return source_digest(_PACKAGE, _BUILDER_MODULES)
 
 
 def parametric_parameters(resolution: int | str, third_molars: bool, diastema_mm: float) -> dict:

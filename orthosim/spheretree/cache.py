@@ -31,6 +31,7 @@ import numpy as np
 
 from ..atomic import atomic_path
 from ..lifeline import exit_with_parent
+from ..sourcedigest import source_digest
 from .build import build_sphere_tree, check_request, mesh_arrays
 from .tree import SphereTree
 
@@ -43,11 +44,7 @@ _PACKAGE = Path(__file__).resolve().parent
 @functools.cache
 def builder_source_digest() -> str:
     """Hex SHA-256 of the source text of the tree-building modules (read once a process)."""
-    h = hashlib.sha256()
-    for name in _BUILDER_MODULES:
-        h.update(name.encode())
-        h.update((_PACKAGE / f"{name}.py").read_bytes())
-    return h.hexdigest()
+    return source_digest(_PACKAGE, _BUILDER_MODULES)
 
 
 def default_cache_dir() -> Path:
