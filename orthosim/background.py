@@ -42,7 +42,6 @@ If this process is killed outright, the child ends with it (`orthosim.lifeline.e
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import gc
 import importlib
 import multiprocessing
@@ -240,7 +239,9 @@ def release_freed_heap() -> bool:
     leaves tens of MB freed but still mapped (measured: a 28-tooth child, 327 -> 298 MB). Milliseconds;
     False where the C library is not glibc."""
     try:
-        return bool(ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0))
+        # the symbols already loaded into this process: no library search (find_library runs
+        # ldconfig in a subprocess, ~2 ms, on each of a run's two calls)
+        return bool(ctypes.CDLL(None).malloc_trim(0))
     except (OSError, AttributeError):
         return False
 
