@@ -176,6 +176,27 @@ def _render_variants(dentition, states, size, frames_per_round: int, rounds: int
 
 
 
+def _against_stages(e2e: dict, fps_sim: float | None, fps_render: float, render_with_output: dict) -> dict:
+    """End to end against its stages (issue 15's target: at least 0.85 of the slower of simulation
+    and rendering), read two ways, and the bound the machine's cores set.
+
+    `share_of_slower_stage` takes the stages as `fps.simulation` and `fps.render` (draw and read
+    back alone, no encoding); `share_of_slower_stage_with_output` takes rendering as what it does in
+    the pipeline, drawing and writing PNG frames and MP4 (`end_to_end_synthetic`: render_run fed
+    with ready states). Both stages alone have the machine to themselves; end to end they share its
+    cores, so the frame rate cannot pass cores / CPU per frame (`cpu_bound_fps`, from the run's own
+    `cpu_ms_per_frame`): `share_of_cpu_bound` says how much of that the pipeline's overlap reaches."""
+    cpu = (e2e.get("cpu_ms_per_frame") or {}).get("total")
+    cores = e2e.get("cores") or os.cpu_count() or 1
+    bound = 1000.0 * cores / cpu if cpu else None
+    slower = min(fps_render, fps_sim) if fps_sim is not None else fps_render
+    slower_out = min(render_with_output["fps"], fps_sim) if fps_sim is not None else render_with_output["fps"]
+    return {"slower_stage_fps": slower, "share_of_slower_stage": e2e["fps"] / slower,
+            "slower_stage_with_output_fps": slower_out, "share_of_slower_stage_with_output": e2e["fps"] / slower_out,
+            "target_share": 0.85, "cpu_ms_per_frame": cpu, "cores": cores, "cpu_bound_fps": bound,
+            "share_of_cpu_bound": e2e["fps"] / bound if bound else None}
+
+
 def _step_against_detector(movement_model, detector: str, n_states: int, warmup: int) -> dict:
     """Informative, beside fps.simulation and collision_us_per_step (measured minutes apart, so a
     change of the machine's load between them moves their ratio): the same simulation steps again,
@@ -491,6 +512,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
                 k: (v is not None and 1e6 / v >= TARGET_FPS) for k, v in collision.get("collision_us_per_step", {}).items()},
         },
         "end_to_end": e2e,
+        "end_to_end_against_stages": _against_stages(e2e, fps_sim, fps_render, e2e_synthetic),
         "end_to_end_synthetic": e2e_synthetic,
         "end_to_end_interpolated": e2e_interp,
         "end_to_end_simulation_on_thread": e2e_thread,

@@ -98,6 +98,13 @@ def test_bench_record_follows_the_output_contract(tmp_path, dentition):
     cpu = record["end_to_end"]["cpu_ms_per_frame"]  # where end to end spends its CPU (Linux /proc)
     if sys.platform.startswith("linux"):
         assert cpu["main"] > 0 and cpu["total"] >= cpu["main"] + cpu.get("png", 0.0)
+        # end to end against its stages: with no simulation the slower stage is rendering, and the
+        # cores bound the frame rate by the run's own CPU per frame
+        stages = record["end_to_end_against_stages"]
+        assert stages["slower_stage_fps"] == fps["render"]
+        assert stages["share_of_slower_stage"] == pytest.approx(fps["end_to_end"] / fps["render"])
+        assert stages["slower_stage_with_output_fps"] == record["end_to_end_synthetic"]["fps"]
+        assert stages["cpu_bound_fps"] == pytest.approx(1000 * stages["cores"] / cpu["total"])
 
 
 def test_synthetic_motion_moves_only_the_moving_teeth(dentition):
