@@ -20,6 +20,9 @@ machine does not move the figure; the end-to-end records also give frames / tota
     `SyntheticMotion` instead of the simulation, and `end_to_end_interpolated` with
     `frames_per_step` frames per simulation step (poses interpolated between steps,
     `render.timeline`), which is what `orthosim run` writes by default;
+  - end_to_end_against_stages: end to end as a share of the slower stage (target 0.85), with
+    rendering read as draw + read-back and as drawing + writing frames, and of the frame rate the
+    cores allow at the run's own CPU per frame;
   - render_variants: the same render with each optimisation undone in turn, measured
     round-robin in the same run so that the ratios stand even when the absolute figures wander
     with the machine's load;
