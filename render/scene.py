@@ -56,6 +56,16 @@ def _drawn_parts(hide_roots: bool) -> list:
     return [CROWN] if hide_roots else [CROWN, ROOT]
 
 
+def used_vertices(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """(the vertices `faces` use, ascending; `faces` renumbered into that list): what
+    `np.unique(faces, return_inverse=True)` gives, by marking and counting in O(n) rather than
+    sorting (a third of a scene's set-up time with np.unique)."""
+    mark = np.zeros(n_vertices, bool)
+    mark[faces] = True
+    slot = np.cumsum(mark) - 1
+    return np.flatnonzero(mark), slot[faces]
+
+
 def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: bool, smooth_cej: bool = True):
     """Vertices duplicated along the CEJ so crown and root faces get their own colour.
 
@@ -83,7 +93,7 @@ def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: boo
         faces = cut.faces[chosen]
         if not len(faces):
             continue
-        used, inverse = np.unique(faces.reshape(-1), return_inverse=True)
+        used, inverse = used_vertices(faces.reshape(-1), len(cut.vertices))
         pos.append(cut.vertices[used])
         nrm.append(cut.normals[used])
         colour = CROWN_COLOR if part == CROWN else ROOT_COLOR
@@ -120,8 +130,8 @@ class _ToothDrawable:
         self.indices = idx  # (m, 3) drawn vertices of each drawn face; face_of_row: its model face
         # the crown's drawn vertices (the first block) as blends of the model's crown vertices, in
         # the order of `Tooth.crown_vertices`, for pictures coloured per crown vertex
-        self.crown_blend = vertex_blend(np.unique(tooth.mesh.faces[tooth.face_part == CROWN]), ends[:n_crown],
-                                        t[:n_crown], pos[:n_crown], tooth.mesh.vertices)
+        crown, _ = used_vertices(tooth.mesh.faces[tooth.face_part == CROWN], len(tooth.mesh.vertices))
+        self.crown_blend = vertex_blend(crown, ends[:n_crown], t[:n_crown], pos[:n_crown], tooth.mesh.vertices)
         self.contact_surface = None  # built on first use by exact contact faces
         # bounding sphere in the local frame, to skip teeth far from every contact
         self.center_local = pos.mean(axis=0).astype(np.float64)

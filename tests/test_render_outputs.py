@@ -165,3 +165,16 @@ def test_render_run_reports_each_frame_to_its_caller_and_the_bench_times_render_
                        n_markers=30, tree_build=False, staging=False, startup=False, png=False)
     assert calls == [None]  # end_to_end (synthetic here) is render_run's own loop
     assert record["end_to_end_synthetic"]["fps"] > 0
+
+
+def test_used_vertices_is_numpys_unique_with_its_inverse():
+    from render.scene import used_vertices
+
+    rng = np.random.default_rng(7)
+    for n, m in ((1, 1), (10, 4), (500, 300), (2000, 50)):
+        faces = rng.integers(0, n, size=(m, 3))
+        used, inverse = used_vertices(faces, n)
+        want_used, want_inverse = np.unique(faces, return_inverse=True)
+        assert np.array_equal(used, want_used)
+        assert np.array_equal(inverse, want_inverse.reshape(faces.shape))
+        assert np.array_equal(used[inverse], faces)
