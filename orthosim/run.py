@@ -186,10 +186,12 @@ def frames_per_step(options: RunOptions, steps: int) -> int:
 # ------------------------------------------------------------------------- 2-4. model, trees, simulate
 
 
-def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None) -> Iterator:
+def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, shared: bool = False) -> Iterator:
     """The simulation side of a run: PhaseDone("model"), PhaseDone("trees"), one StepRecord per step,
     then the RunResult. Picklable arguments: it runs in the child process when the run draws.
-    The per-step detail (steps.jsonl, distances_per_step.csv) streams into out_dir as it comes."""
+    The per-step detail (steps.jsonl, distances_per_step.csv) streams into out_dir as it comes.
+    shared: `dentition` is drawn meanwhile by another thread of this process (its meshes' caches
+    are then left alone)."""
     from .background import release_freed_heap
     from .collision import CollisionModel, ExactQueries
     from .metrics import occlusion_summary
@@ -206,6 +208,8 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None) 
     queries.prepare(n for n in dent.fdis if n not in extracted)
     t2 = time.perf_counter()
     model = MovementModel.build(case, dent, collision=collision)
+    if not shared:
+        dent.drop_mesh_caches()  # the meshes' derived arrays the build asked for (~30 MB on 28 teeth)
     release_freed_heap()  # what building the model freed, before a run of any length
     t3 = time.perf_counter()
     how = "from the cache" if cached else ("given" if dentition is not None else "built")
@@ -323,7 +327,7 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
         else:
             if options.simulate_in_process or options.single_core:
                 dent = case.build_dentition()
-                split, where = _Split(simulation_stream(case, options.detector, out_dir, dentition=dent), log, keep), "in this process"
+                split, where = _Split(simulation_stream(case, options.detector, out_dir, dentition=dent, shared=True), log, keep), "in this process"
             else:
                 from .background import ChildProcessIterator, fork_is_safe
 
@@ -338,6 +342,7 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
                     t = time.perf_counter()
                     cached = case.dentition_is_cached()
                     dent = case.build_dentition()
+                    dent.drop_mesh_caches()  # a build's leftovers: each process derives only what it uses
                     log.phase("model", time.perf_counter() - t,
                               f"{dent.description}, {'from the cache' if cached else 'built and cached'}")
                 if dent is not None and fork_is_safe():  # still no thread running after the build

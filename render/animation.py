@@ -31,6 +31,7 @@ from typing import Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from orthosim.atomic import atomic_path
+from orthosim.background import release_freed_heap
 
 from .cameras import check_view
 from .frame_state import FrameState
@@ -377,6 +378,8 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
         from .overlay import FrameOverlay
 
         overlay = FrameOverlay(caption, dentition, size)
+    dentition.drop_mesh_caches()  # the scene and overlay keep their own arrays; the meshes' derived ones go
+    release_freed_heap()
     render_s = 0.0
     n = 0
     try:
