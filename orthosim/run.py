@@ -192,7 +192,7 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, 
     The per-step detail (steps.jsonl, distances_per_step.csv) streams into out_dir as it comes.
     shared: `dentition` is drawn meanwhile by another thread of this process (its meshes' caches
     are then left alone)."""
-    from .background import release_freed_heap
+    from .background import release_compiler_pages, release_freed_heap
     from .collision import CollisionModel, ExactQueries
     from .metrics import occlusion_summary
     from .movement.report import DISTANCES_PER_STEP_FILE, STEPS_FILE, RunReport
@@ -203,6 +203,7 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, 
     dent = dentition if dentition is not None else case.build_dentition()
     t1 = time.perf_counter()
     collision = CollisionModel.from_dentition(dent)
+    release_compiler_pages()  # numba's functions are loaded (the sphere trees'), before the BVHs' memory comes
     queries = ExactQueries(collision)  # the exact meshes' BVHs, built now rather than inside the first step
     extracted = frozenset(case.extractions)
     queries.prepare(n for n in dent.fdis if n not in extracted)
@@ -217,7 +218,10 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, 
     yield PhaseDone("trees", t2 - t1, f"{len(collision.bodies)} sphere trees and exact-mesh BVHs")
     out_dir = Path(out_dir)
     report = RunReport(model, detector, steps_file=out_dir / STEPS_FILE, distances_file=out_dir / DISTANCES_PER_STEP_FILE)
-    yield from report.collect(simulate(model, detector, queries=queries))
+    for record in report.collect(simulate(model, detector, queries=queries)):
+        yield record
+        if record.step == 1:  # and what the first steps compiled: numba's compiler lies idle from now on
+            release_compiler_pages()
     report.finish_streams(out_dir)
     metrics = report.metrics()
     metrics["model"] = model_summary(dent)
@@ -270,13 +274,17 @@ class _Split:
 # ------------------------------------------------------------------------------------------ the run
 
 _SIMULATION_MODULES = ("orthosim.run", "orthosim.collision", "orthosim.movement.simulation")
+# what both sides of a drawn run use (the teeth: numpy, scipy, trimesh and FCL, which trimesh loads),
+# imported before the fork so that the two processes share it; the step's own (the collision
+# package, numba) only the simulation child imports, and the renderer only this process
+_SHARED_MODULES = ("orthosim.run", "orthosim.dentition", "orthosim.metrics", "orthosim.movement.records")
 
 
-def _import_simulation() -> None:
-    """Import what the simulation side runs on (numpy, trimesh, FCL, numba and ours), before a fork."""
+def _import_modules(names) -> None:
+    """Import `names` now (before a fork, or in a spawned child waiting for its work)."""
     import importlib
 
-    for name in _SIMULATION_MODULES:
+    for name in names:
         importlib.import_module(name)
 
 
@@ -337,8 +345,8 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
                     # imports done and the teeth loaded once; the renderer (and its OpenGL
                     # context) comes after the fork, in this process only
                     t = time.perf_counter()
-                    _import_simulation()
-                    log.phase("imports", time.perf_counter() - t, "numpy, trimesh, FCL, numba: once, for both processes")
+                    _import_modules(_SHARED_MODULES)
+                    log.phase("imports", time.perf_counter() - t, "numpy, scipy, trimesh, FCL: once, for both processes")
                     t = time.perf_counter()
                     cached = case.dentition_is_cached()
                     dent = case.build_dentition()

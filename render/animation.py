@@ -31,7 +31,7 @@ from typing import Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from orthosim.atomic import atomic_path
-from orthosim.background import release_freed_heap
+from orthosim.background import release_compiler_pages, release_freed_heap
 
 from .cameras import check_view
 from .frame_state import FrameState
@@ -400,6 +400,8 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
                         frame = tile(images)
                     previous = state
                 sink.add(frame, images if split_views else ())
+                if n == 0:  # llvmpipe has compiled the scene's shaders: its LLVM's code lies idle from now on
+                    release_compiler_pages()
                 if on_frame is not None:
                     on_frame(state, scene)
                 n += 1
