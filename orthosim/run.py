@@ -281,7 +281,7 @@ _SHARED_MODULES = ("orthosim.run", "orthosim.dentition", "orthosim.metrics", "or
 
 
 def _import_modules(names) -> None:
-    """Import `names` now (before a fork, or in a spawned child waiting for its work)."""
+    """Import `names` now (before a fork: the child shares them)."""
     import importlib
 
     for name in names:
@@ -341,9 +341,10 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
 
                 dent = None
                 if fork_is_safe():
-                    # fork: the child starts as a copy of this process, with the simulation's
-                    # imports done and the teeth loaded once; the renderer (and its OpenGL
-                    # context) comes after the fork, in this process only
+                    # fork: the child starts as a copy of this process, with the imports both
+                    # sides use done and the teeth loaded once; the step's own imports (numba,
+                    # the collision package) come after the fork in the child only, the renderer
+                    # (and its OpenGL context) in this process only
                     t = time.perf_counter()
                     _import_modules(_SHARED_MODULES)
                     log.phase("imports", time.perf_counter() - t, "numpy, scipy, trimesh, FCL: once, for both processes")
