@@ -357,6 +357,10 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
     has one core to itself and shares the machine with others doing the same (`orthosim batch`
     workers); a run alone wants the pipeline, which keeps more than one core busy.
 
+    Memory: once the scene is built, the dentition's meshes forget their trimesh caches
+    (`Dentition.drop_mesh_caches`: derived values, computed again if asked for), and once the first
+    frame is drawn llvmpipe's LLVM code pages are handed back (`orthosim.background.release_compiler_pages`).
+
     Returns {"frames": n, "fps": end-to-end frames per second (render, read back, encode, write),
     "render_fps": ..., "views": [...], "size": [w, h], "encode_s": time to flush the encoders, ...}.
     The caller records it in run.json (it varies with the machine).
