@@ -250,7 +250,7 @@ def release_freed_heap() -> bool:
 # the JIT compilers' libraries: numba's (llvmlite) and Mesa llvmpipe's (libLLVM-15.so.1, libLLVM.so.19 ...)
 COMPILER_LIBRARIES = re.compile(r"^(libllvmlite\.so|libLLVM[-.])")
 _MADV_DONTNEED = 4
-_PAGE = 4096
+_PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
 
 
 def release_compiler_pages(libraries: re.Pattern = COMPILER_LIBRARIES) -> int:
@@ -279,17 +279,20 @@ def release_compiler_pages(libraries: re.Pattern = COMPILER_LIBRARIES) -> int:
                 parts = line.split(None, 5)
                 if len(parts) == 6 and "w" not in parts[1] and libraries.match(os.path.basename(parts[5].rstrip())):
                     spans.append(tuple(int(x, 16) for x in parts[0].split("-")))
-        released = 0
         with open("/proc/self/pagemap", "rb", buffering=0) as pagemap:
-            for lo, hi in spans:
-                flags = np.frombuffer(os.pread(pagemap.fileno(), (hi - lo) // _PAGE * 8, lo // _PAGE * 8), np.uint64) >> np.uint64(61)
-                present, swapped, file_page = (flags >> np.uint64(2)) & 1, (flags >> np.uint64(1)) & 1, flags & 1
-                own = ((present == 1) & (file_page == 0)) | (swapped == 1)  # this process's copy: keep
-                # runs of pages free of our own copies: [starts[k], ends[k]) page indices
-                edges = np.flatnonzero(np.diff(np.concatenate(([1], own.astype(np.int8), [1]))))
-                for a, b in zip(edges[::2], edges[1::2]):
-                    if madvise(lo + int(a) * _PAGE, int(b - a) * _PAGE, _MADV_DONTNEED) == 0:
-                        released += int(((present[a:b] == 1) & (file_page[a:b] == 1)).sum()) * _PAGE
+            flags = [np.frombuffer(os.pread(pagemap.fileno(), (hi - lo) // _PAGE * 8, lo // _PAGE * 8), np.uint64)
+                     >> np.uint64(61) for lo, hi in spans]
+        if not any((f >> np.uint64(2)).any() for f in flags):  # nothing resident, or a pagemap that shows nothing: leave all
+            return 0
+        released = 0
+        for (lo, hi), f in zip(spans, flags):
+            present, swapped, file_page = (f >> np.uint64(2)) & 1, (f >> np.uint64(1)) & 1, f & 1
+            own = ((present == 1) & (file_page == 0)) | (swapped == 1)  # this process's copy: keep
+            # runs of pages holding no copy of our own, as [a, b) page indices
+            edges = np.flatnonzero(np.diff(np.concatenate(([1], own.astype(np.int8), [1]))))
+            for a, b in zip(edges[::2], edges[1::2]):
+                if madvise(lo + int(a) * _PAGE, int(b - a) * _PAGE, _MADV_DONTNEED) == 0:
+                    released += int(((present[a:b] == 1) & (file_page[a:b] == 1)).sum()) * _PAGE
         return released
     except (OSError, AttributeError, ValueError):
         return 0
