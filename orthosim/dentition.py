@@ -45,6 +45,22 @@ class Dentition:
             pairs += list(zip(order[:-1], order[1:]))
         return pairs
 
+    def drop_mesh_caches(self) -> int:
+        """Forget what trimesh has derived from the teeth's vertices and faces (triangles, edges,
+        normals, adjacency ...), computed again when next asked for, the same; bytes of arrays freed.
+
+        A model build or a scene leaves ~30 MB of these on a 28-tooth dentition that the run no
+        longer reads. The meshes are made from vertices and faces only (`orthosim.meshload`, the
+        dentition cache, the parametric teeth), so their caches hold nothing but derived values.
+        Follow with `orthosim.background.release_freed_heap` to give the pages back.
+        """
+        freed = 0
+        for tooth in self.teeth.values():
+            cache = tooth.mesh._cache  # trimesh keeps derived values here, keyed on the data's hash
+            freed += sum(getattr(v, "nbytes", 0) for v in cache.cache.values())
+            cache.clear()
+        return freed
+
     def crown_centers(self, poses: dict[int, np.ndarray] | None = None) -> dict[int, np.ndarray]:
         """FDI -> (3,) arch-frame crown centre (mm) under `poses` (rest poses by default)."""
         out = {}

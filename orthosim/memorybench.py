@@ -13,7 +13,7 @@ no sampling can miss a process's own peak. Which memory: the tree's distinct res
 pages (from /proc/PID/pagemap, every `unique_interval_s`), each page once however many of the
 tree's processes map it. That is what the run takes from the machine. Summed RSS, kept beside it,
 counts every page a forked child shares with its parent twice (the simulation child is a fork made
-after the imports and the model load: ~150 MB of libraries and objects counted twice); PSS, kept
+after the shared imports and the model load: ~70 MB of libraries and objects counted twice); PSS, kept
 beside it too, splits each shared page among all processes mapping it, including processes outside
 the run (other programs mapping the same libraries), so it reads low on a busy machine. Reading
 page frames needs CAP_SYS_ADMIN (root); without it the headline is the PSS and `peak_measure` says

@@ -186,11 +186,13 @@ def frames_per_step(options: RunOptions, steps: int) -> int:
 # ------------------------------------------------------------------------- 2-4. model, trees, simulate
 
 
-def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None) -> Iterator:
+def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, shared: bool = False) -> Iterator:
     """The simulation side of a run: PhaseDone("model"), PhaseDone("trees"), one StepRecord per step,
     then the RunResult. Picklable arguments: it runs in the child process when the run draws.
-    The per-step detail (steps.jsonl, distances_per_step.csv) streams into out_dir as it comes."""
-    from .background import release_freed_heap
+    The per-step detail (steps.jsonl, distances_per_step.csv) streams into out_dir as it comes.
+    shared: `dentition` is drawn meanwhile by another thread of this process (its meshes' caches
+    are then left alone)."""
+    from .background import release_compiler_pages, release_freed_heap
     from .collision import CollisionModel, ExactQueries
     from .metrics import occlusion_summary
     from .movement.report import DISTANCES_PER_STEP_FILE, STEPS_FILE, RunReport
@@ -201,11 +203,14 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None) 
     dent = dentition if dentition is not None else case.build_dentition()
     t1 = time.perf_counter()
     collision = CollisionModel.from_dentition(dent)
+    release_compiler_pages()  # numba's functions are loaded (the sphere trees'), before the BVHs' memory comes
     queries = ExactQueries(collision)  # the exact meshes' BVHs, built now rather than inside the first step
     extracted = frozenset(case.extractions)
     queries.prepare(n for n in dent.fdis if n not in extracted)
     t2 = time.perf_counter()
     model = MovementModel.build(case, dent, collision=collision)
+    if not shared:
+        dent.drop_mesh_caches()  # the meshes' derived arrays the build asked for (~30 MB on 28 teeth)
     release_freed_heap()  # what building the model freed, before a run of any length
     t3 = time.perf_counter()
     how = "from the cache" if cached else ("given" if dentition is not None else "built")
@@ -213,7 +218,10 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None) 
     yield PhaseDone("trees", t2 - t1, f"{len(collision.bodies)} sphere trees and exact-mesh BVHs")
     out_dir = Path(out_dir)
     report = RunReport(model, detector, steps_file=out_dir / STEPS_FILE, distances_file=out_dir / DISTANCES_PER_STEP_FILE)
-    yield from report.collect(simulate(model, detector, queries=queries))
+    for record in report.collect(simulate(model, detector, queries=queries)):
+        yield record
+        if record.step == 1:  # and what the first steps compiled: numba's compiler lies idle from now on
+            release_compiler_pages()
     report.finish_streams(out_dir)
     metrics = report.metrics()
     metrics["model"] = model_summary(dent)
@@ -266,13 +274,17 @@ class _Split:
 # ------------------------------------------------------------------------------------------ the run
 
 _SIMULATION_MODULES = ("orthosim.run", "orthosim.collision", "orthosim.movement.simulation")
+# what both sides of a drawn run use (the teeth: numpy, scipy, trimesh and FCL, which trimesh loads),
+# imported before the fork so that the two processes share it; the step's own (the collision
+# package, numba) only the simulation child imports, and the renderer only this process
+_SHARED_MODULES = ("orthosim.run", "orthosim.dentition", "orthosim.metrics", "orthosim.movement.records")
 
 
-def _import_simulation() -> None:
-    """Import what the simulation side runs on (numpy, trimesh, FCL, numba and ours), before a fork."""
+def _import_modules(names) -> None:
+    """Import `names` now (before a fork: the child shares them)."""
     import importlib
 
-    for name in _SIMULATION_MODULES:
+    for name in names:
         importlib.import_module(name)
 
 
@@ -323,21 +335,23 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
         else:
             if options.simulate_in_process or options.single_core:
                 dent = case.build_dentition()
-                split, where = _Split(simulation_stream(case, options.detector, out_dir, dentition=dent), log, keep), "in this process"
+                split, where = _Split(simulation_stream(case, options.detector, out_dir, dentition=dent, shared=True), log, keep), "in this process"
             else:
                 from .background import ChildProcessIterator, fork_is_safe
 
                 dent = None
                 if fork_is_safe():
-                    # fork: the child starts as a copy of this process, with the simulation's
-                    # imports done and the teeth loaded once; the renderer (and its OpenGL
-                    # context) comes after the fork, in this process only
+                    # fork: the child starts as a copy of this process, with the imports both
+                    # sides use done and the teeth loaded once; the step's own imports (numba,
+                    # the collision package) come after the fork in the child only, the renderer
+                    # (and its OpenGL context) in this process only
                     t = time.perf_counter()
-                    _import_simulation()
-                    log.phase("imports", time.perf_counter() - t, "numpy, trimesh, FCL, numba: once, for both processes")
+                    _import_modules(_SHARED_MODULES)
+                    log.phase("imports", time.perf_counter() - t, "numpy, scipy, trimesh, FCL: once, for both processes")
                     t = time.perf_counter()
                     cached = case.dentition_is_cached()
                     dent = case.build_dentition()
+                    dent.drop_mesh_caches()  # a build's leftovers: each process derives only what it uses
                     log.phase("model", time.perf_counter() - t,
                               f"{dent.description}, {'from the cache' if cached else 'built and cached'}")
                 if dent is not None and fork_is_safe():  # still no thread running after the build

@@ -31,6 +31,7 @@ from typing import Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from orthosim.atomic import atomic_path
+from orthosim.background import release_compiler_pages, release_freed_heap
 
 from .cameras import check_view
 from .frame_state import FrameState
@@ -356,6 +357,10 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
     has one core to itself and shares the machine with others doing the same (`orthosim batch`
     workers); a run alone wants the pipeline, which keeps more than one core busy.
 
+    Memory: once the scene is built, the dentition's meshes forget their trimesh caches
+    (`Dentition.drop_mesh_caches`: derived values, computed again if asked for), and once the first
+    frame is drawn llvmpipe's LLVM code pages are handed back (`orthosim.background.release_compiler_pages`).
+
     Returns {"frames": n, "fps": end-to-end frames per second (render, read back, encode, write),
     "render_fps": ..., "views": [...], "size": [w, h], "encode_s": time to flush the encoders, ...}.
     The caller records it in run.json (it varies with the machine).
@@ -377,6 +382,8 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
         from .overlay import FrameOverlay
 
         overlay = FrameOverlay(caption, dentition, size)
+    dentition.drop_mesh_caches()  # the scene and overlay keep their own arrays; the meshes' derived ones go
+    release_freed_heap()
     render_s = 0.0
     n = 0
     try:
@@ -397,6 +404,8 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
                         frame = tile(images)
                     previous = state
                 sink.add(frame, images if split_views else ())
+                if n == 0:  # llvmpipe has compiled the scene's shaders: its LLVM's code lies idle from now on
+                    release_compiler_pages()
                 if on_frame is not None:
                     on_frame(state, scene)
                 n += 1

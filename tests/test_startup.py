@@ -55,8 +55,8 @@ def test_help_and_refused_options_answer_before_any_heavy_import(tmp_path, args,
 
 @pytest.mark.skipif(sys.platform != "linux", reason="reads /proc to see the child's command line")
 def test_a_drawn_run_simulates_in_a_forked_child_that_neither_imports_nor_loads_the_teeth_again(tmp_path):
-    # the child of `orthosim run` is a copy of the drawing process made after the simulation's imports
-    # and the teeth's load: it reports the teeth as given, where a spawned child loads them itself
+    # the child of `orthosim run` is a copy of the drawing process made after the imports both sides
+    # use and the teeth's load: it reports the teeth as given, where a spawned child loads them itself
     env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa"}
     r = subprocess.run([sys.executable, "-c", "from orthosim.cli import entry; entry()", "run",
                         "cases/case3_incisor_space_closure.toml", "--out", tmp_path / "o", "--verbose",

@@ -56,6 +56,7 @@ from ..metrics import PairDistance, tooth_to_tooth_distances
 from .biomechanics import Motion, RateLaw, ToothMechanics, build_mechanics, tooth_motion
 from .impact import Body, impact
 from .propagation import ForceBalance, propagate
+from .records import CollisionEvent, StepRecord
 from .vec import length
 
 @dataclass(frozen=True)
@@ -97,50 +98,6 @@ class MovementSettings:
         return cls(force_share=sim.force_share, restitution=sim.restitution,
                    resistance_rule=sim.resistance_rule, resistance_fraction=sim.resistance_fraction,
                    occlusal_slide_mm=slide)
-
-
-@dataclass(frozen=True, eq=False)
-class CollisionEvent:
-    """Two teeth met in a step: at `time` (fraction of the step; 1.0 for discrete detectors, which
-    only see the end), with the impact response of the paper."""
-
-    pair: tuple[int, int]
-    time: float
-    impact: dict
-
-
-@dataclass(frozen=True, eq=False)
-class StepRecord:
-    """The state after one step (step 0: the initial state, before any movement).
-
-    poses: FDI -> (4, 4) local -> arch frame, mm (extracted teeth keep their rest pose, not drawn).
-    moving: teeth that moved in the step. touching: pairs in contact at the step's end.
-    contact_centers (n, 3) mm / contact_radii (n,) mm: overlapping leaf spheres of touching pairs.
-    collisions: events of the step. forces: the step's force balance (cN).
-    max_penetration_mm: deepest interpenetration the run has added to any candidate pair, on the
-        exact meshes (mm; depth now less depth in the initial model, which may have some).
-    distances: the paper's tooth-to-tooth distances (mm) per adjacent pair.
-    raw_penetration_mm: deepest interpenetration of any candidate pair as it stands (mm).
-    penetrating: ((a, b), mm) for every candidate pair interpenetrating as it stands, deepest first.
-    """
-
-    step: int
-    time_days: float
-    poses: dict[int, np.ndarray]
-    moving: frozenset[int]
-    touching: tuple[tuple[int, int], ...]
-    contact_centers: np.ndarray
-    contact_radii: np.ndarray
-    collisions: tuple[CollisionEvent, ...]
-    forces: ForceBalance | None
-    max_penetration_mm: float
-    distances: tuple[PairDistance, ...]
-    raw_penetration_mm: float = 0.0
-    penetrating: tuple[tuple[tuple[int, int], float], ...] = ()
-
-    @property
-    def total_distance_mm(self) -> float:
-        return float(sum(d.distance_mm for d in self.distances))
 
 
 @dataclass(frozen=True, eq=False)

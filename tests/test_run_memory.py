@@ -1,0 +1,156 @@
+"""What keeps a drawn run's memory down (issue 12): each process forgets what it no longer reads.
+
+The simulation side drops the teeth meshes' trimesh caches once its model is built, the drawing
+side once its scene is; an LLVM's code pages are handed back once it has compiled; the drawing
+process reads step records without importing the simulation's modules (numba, the collision package).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import pickle
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from orthosim.background import release_compiler_pages
+from orthosim.case import load_case
+from orthosim.movement.records import CollisionEvent, StepRecord
+
+ROOT = Path(__file__).resolve().parent.parent
+CASE = ROOT / "cases" / "case3_incisor_space_closure.toml"
+
+
+def _resident_kb(path_end: str) -> int:
+    """kB of this process's resident pages in the mappings of the file whose path ends with `path_end`."""
+    total, inside = 0, False
+    with open("/proc/self/smaps") as smaps:
+        for line in smaps:
+            fields = line.split()
+            if fields and "-" in fields[0] and len(fields) >= 5 and not fields[0].endswith(":"):
+                inside = len(fields) >= 6 and fields[-1].endswith(path_end)
+            elif inside and fields[0] == "Rss:":
+                total += int(fields[1])
+    return total
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="madvise and /proc: Linux")
+def test_a_compiler_librarys_resident_code_pages_are_handed_back_and_read_again_the_same(tmp_path):
+    import _ctypes
+
+    lib = tmp_path / "liborthosimtestcompiler.so"
+    shutil.copyfile(_ctypes.__file__, lib)
+    handle = ctypes.CDLL(str(lib))
+    spans = []
+    with open("/proc/self/maps") as maps:
+        for line in maps:
+            parts = line.split(None, 5)
+            if len(parts) == 6 and parts[5].rstrip() == str(lib) and "w" not in parts[1]:
+                spans.append(tuple(int(x, 16) for x in parts[0].split("-")))
+    content = [ctypes.string_at(lo, hi - lo) for lo, hi in spans]  # every read-only page touched
+    before = _resident_kb(lib.name)
+    assert before >= 0.9 * sum(hi - lo for lo, hi in spans) / 1024
+
+    released = release_compiler_pages(re.compile(re.escape(lib.name)))
+    after = _resident_kb(lib.name)
+    assert after <= before / 4
+    assert released >= (before - after) * 1024 * 0.9
+    assert release_compiler_pages(re.compile("^no-such-library")) == 0
+    assert [ctypes.string_at(lo, hi - lo) for lo, hi in spans] == content  # read again: the same bytes
+    del handle
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="madvise and /proc: Linux")
+def test_pages_a_process_has_written_in_a_read_only_mapping_are_kept(tmp_path):
+    # like a library's relocated data, made read-only after loading: the page is this process's copy,
+    # not the file's, and must keep what was written into it
+    import mmap
+
+    path = tmp_path / "liborthosimtestwritten.so"
+    path.write_bytes(bytes(4 * mmap.PAGESIZE))
+    with open(path, "r+b") as f:
+        m = mmap.mmap(f.fileno(), 4 * mmap.PAGESIZE, flags=mmap.MAP_PRIVATE, prot=mmap.PROT_READ | mmap.PROT_WRITE)
+    m[mmap.PAGESIZE:mmap.PAGESIZE + 5] = b"moved"  # page 1: copied on write
+    _ = m[3 * mmap.PAGESIZE]  # page 3: the file's, resident
+    address = ctypes.addressof(ctypes.c_char.from_buffer(m))
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.mprotect.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
+    assert libc.mprotect(address, 4 * mmap.PAGESIZE, mmap.PROT_READ) == 0
+    released = release_compiler_pages(re.compile(re.escape(path.name)))
+    assert released >= mmap.PAGESIZE  # the file's page
+    assert ctypes.string_at(address + mmap.PAGESIZE, 5) == b"moved"
+    assert ctypes.string_at(address + 3 * mmap.PAGESIZE, 5) == bytes(5)
+    assert libc.mprotect(address, 4 * mmap.PAGESIZE, mmap.PROT_READ | mmap.PROT_WRITE) == 0
+    m.close()
+
+
+def test_dropping_the_mesh_caches_forgets_derived_arrays_and_they_come_back_the_same():
+    dent = load_case(CASE).build_dentition()
+    tooth = next(iter(dent.teeth.values()))
+    triangles = tooth.mesh.triangles.copy()
+    edges = tooth.mesh.edges_unique.copy()
+    normals = tooth.mesh.vertex_normals.copy()
+    freed = dent.drop_mesh_caches()
+    assert freed >= triangles.nbytes + edges.nbytes + normals.nbytes
+    assert all(not t.mesh._cache.cache for t in dent.teeth.values())
+    assert dent.drop_mesh_caches() == 0
+    np.testing.assert_array_equal(tooth.mesh.triangles, triangles)
+    np.testing.assert_array_equal(tooth.mesh.edges_unique, edges)
+    np.testing.assert_array_equal(tooth.mesh.vertex_normals, normals)
+
+
+@pytest.mark.parametrize("shared", [False, True])
+def test_the_simulation_side_drops_the_caches_its_model_build_made_unless_another_thread_draws_the_teeth(tmp_path, shared):
+    from orthosim.run import PhaseDone, simulation_stream
+
+    case = load_case(CASE)
+    dent = case.build_dentition()
+    stream = simulation_stream(case, "discrete", tmp_path, dentition=dent, shared=shared)
+    phases = [next(stream), next(stream)]  # model, trees: the model is built
+    assert [p.name for p in phases if isinstance(p, PhaseDone)] == ["model", "trees"]
+    cached = sum(len(t.mesh._cache.cache) for t in dent.teeth.values())
+    if shared:
+        assert cached > 0  # the build's caches, left for the drawing thread
+    else:
+        assert cached == 0
+    stream.close()
+
+
+def test_a_step_record_unpickles_without_the_simulations_imports():
+    record = StepRecord(step=3, time_days=6.0, poses={11: np.eye(4)}, moving=frozenset({11}), touching=((11, 21),),
+                        contact_centers=np.zeros((1, 3)), contact_radii=np.ones(1),
+                        collisions=(CollisionEvent((11, 21), 0.5, {"dv": 1.0}),), forces=None,
+                        max_penetration_mm=0.01, distances=())
+    code = ("import pickle, sys; r = pickle.loads(sys.stdin.buffer.read()); "
+            "print(type(r).__module__, r.step, r.collisions[0].pair, 'numba' in sys.modules, "
+            "'orthosim.collision' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], input=pickle.dumps(record), capture_output=True, cwd=ROOT,
+                         timeout=120, check=True).stdout.decode().split()
+    assert out == ["orthosim.movement.records", "3", "(11,", "21)", "False", "False"]
+    from orthosim.movement.simulation import StepRecord as SimulationStepRecord
+
+    assert SimulationStepRecord is StepRecord
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the drawn run forks its simulation child on Linux")
+def test_the_drawing_process_of_a_drawn_run_never_imports_numba(tmp_path):
+    # the main process (it draws) reports its imports at exit; the forked child ends with os._exit
+    probe = ("import atexit, json, sys\n"
+             "atexit.register(lambda: print(json.dumps([m for m in ('numba', 'orthosim.collision', 'pyrender') "
+             "if m in sys.modules]), file=sys.stderr))\n"
+             "sys.argv = ['orthosim'] + sys.argv[1:]\n"
+             "from orthosim.cli import entry\nentry()\n")
+    env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa"}
+    r = subprocess.run([sys.executable, "-c", probe, "run", str(CASE), "--out", str(tmp_path / "o"), "--size", "64x48",
+                        "--frames-per-step", "1", "--verbose"], cwd=ROOT, env=env, capture_output=True, text=True,
+                       timeout=900)
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.strip().splitlines()[-1] == '["pyrender"]'  # drew, and the simulation was the child's
+    assert "beside the drawing" in r.stderr
+    assert (tmp_path / "o" / "animation.mp4").stat().st_size > 0
