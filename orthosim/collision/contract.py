@@ -111,7 +111,7 @@ class StepResult:
         return float(np.nanmin(t))
 
     def touching_pairs(self) -> list[tuple[int, int]]:
-        return [(int(a), int(b)) for (a, b), hit in zip(self.pairs, self.touching) if hit]
+        return [(a, b) for (a, b), hit in zip(self.pairs.tolist(), self.touching.tolist()) if hit]
 
     def pair(self, i: int) -> PairResult:
         """The result of pair i alone."""
