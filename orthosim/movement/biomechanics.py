@@ -182,7 +182,7 @@ class Motion:
 
     @property
     def is_still(self) -> bool:
-        return not (np.any(self.velocity) or np.any(self.omega))
+        return not (self.velocity.any() or self.omega.any())
 
     def displacement(self, points: np.ndarray, dt_days: float) -> np.ndarray:
         """(n, 3) mm: how far each arch-frame point (n, 3) of the tooth moves in dt_days."""

@@ -284,6 +284,7 @@ class StepState:
     detector: the run's detector. queries: the run's exact queries and their memos (`ExactQueries`).
     bite: pairs of facing teeth in contact in the initial state (the bite as the model stands): they
         may slide by `occlusal_slide_mm`; contacts the run makes get the touch tolerance.
+    centers: FDI -> (3,) crown centres at `poses` (`Dentition.crown_centers`; found when None).
     """
 
     step: int
@@ -294,6 +295,7 @@ class StepState:
     detector: str
     queries: ExactQueries
     bite: frozenset[tuple[int, int]] = frozenset()
+    centers: Mapping[int, np.ndarray] | None = None
 
     def slide_allowance(self, model: "MovementModel", pair: tuple[int, int]) -> float:
         """mm a facing pair may sink below the rest state while its cusps slide along each other."""
@@ -337,7 +339,8 @@ def initial_state(model: MovementModel, detector: str, queries: ExactQueries | N
     P = {n: np.asarray(T, float).copy() for n, T in model.dentition.rest_poses().items()}
     found = contacts(model.collision, P, _touch_request(model), queries, model.pairs, detector)
     bite = frozenset(p for p in found.touching if p in model.facing)
-    state = StepState(0, 0.0, P, found.touching, found.penetration, detector, queries, bite)
+    state = StepState(0, 0.0, P, found.touching, found.penetration, detector, queries, bite,
+                      model.dentition.crown_centers(P))
     return state, _record(model, state, frozenset(), found, (), None)
 
 
@@ -367,12 +370,14 @@ def motions(model: MovementModel, state: StepState, f: Forces, centers: Mapping[
     wire = model.case.wire.type
     out: dict[int, Motion] = {}
     for n in model.present:
-        free = balance.free.get(n, np.zeros(3))
+        free = balance.free.get(n)
         own = f.loads.get(n, [])
         couple = sum((a.couple_cNmm for a in own), np.zeros(3))
-        if not np.any(free) and not np.any(couple):
+        if (free is None or not free.any()) and not couple.any():
             continue
-        if own and any(np.any(a.force_cN) for a in own):
+        if free is None:
+            free = np.zeros(3)
+        if own and any(a.force_cN.any() for a in own):
             w = np.array([length(a.force_cN) for a in own])
             point = sum(wi * a.point_mm for wi, a in zip(w, own)) / max(w.sum(), 1e-12)
         else:
@@ -384,12 +389,16 @@ def motions(model: MovementModel, state: StepState, f: Forces, centers: Mapping[
     if wire != "rectangular":
         return out
     # a tooth blocked by a neighbour that moves away follows it, as far as its own push would take it
+    settled: dict[tuple[int, int], tuple] = {}  # (i, j) -> the motions (of j, of i) it last left unchanged
     for _ in range(len(model.present)):
         changed = False
         for i, blockers in balance.blocked_by.items():
             for j in blockers:
                 if j not in out:
                     continue
+                seen = settled.get((i, j))
+                if seen is not None and seen[0] is out[j] and seen[1] is out.get(i):
+                    continue  # the same motions (frozen) as when this pair last changed nothing
                 n_ij = _normal(model, (i, j), centers)
                 p = 0.5 * (centers[i] + centers[j])
                 away = float(out[j].displacement(p, dt)[0] @ n_ij) / dt
@@ -402,6 +411,8 @@ def motions(model: MovementModel, state: StepState, f: Forces, centers: Mapping[
                 if target > cur + 1e-12:
                     out[i] = Motion(mi.pivot, mi.velocity + (target - cur) * n_ij, mi.omega)
                     changed = True
+                else:
+                    settled[(i, j)] = (out[j], out.get(i))
         if not changed:
             break
     return out
@@ -538,7 +549,7 @@ def response(model: MovementModel, state: StepState, moves: dict[int, Motion], d
 
 def step(model: MovementModel, state: StepState) -> tuple[StepState, StepRecord]:
     """One step of `case.step_days`: forces, motions, detection, contacts, response."""
-    centers = model.dentition.crown_centers(state.poses)
+    centers = state.centers if state.centers is not None else model.dentition.crown_centers(state.poses)
     f = forces(model, state, centers)
     moves = motions(model, state, f, centers)
     detected = detection(model, state, moves, centers)
@@ -548,7 +559,7 @@ def step(model: MovementModel, state: StepState) -> tuple[StepState, StepRecord]
     events = response(model, state, moves, detected, found, centers)
     k = state.step + 1
     new = StepState(k, k * float(model.case.step_days), P, found.touching, state.rest_depths, state.detector, state.queries,
-                    state.bite)
+                    state.bite, model.dentition.crown_centers(P))
     return new, _record(model, new, moved, found, events, f.balance)
 
 
@@ -566,7 +577,7 @@ def _record(model: MovementModel, state: StepState, moved: frozenset[int], found
         collisions=events,
         forces=balance,
         max_penetration_mm=max(0.0, _deepening(depths, state.rest_depths)) if state.step else 0.0,
-        distances=tuple(tooth_to_tooth_distances(model.dentition, state.poses, set(model.extracted))),
+        distances=tuple(tooth_to_tooth_distances(model.dentition, state.poses, set(model.extracted), state.centers)),
         raw_penetration_mm=max(depths.values(), default=0.0),
         penetrating=_deepest_first(depths),
     )
