@@ -159,6 +159,14 @@ class MovementModel:
     facing: frozenset[tuple[int, int]] = field(default_factory=frozenset)
     total_mass_g: float = 0.0
     arch_orders: dict[F.Arch, list[int]] = field(default_factory=dict)  # present teeth, right to left
+    # FDI -> its place along its arch among the dentition's teeth (extracted ones included), right to left
+    arch_place: dict[int, int] = field(init=False, repr=False)
+
+    def __post_init__(self):
+        place = {}
+        for arch in F.Arch:
+            place.update((t, k) for k, t in enumerate(F.arch_order(arch, set(self.dentition.teeth))))
+        object.__setattr__(self, "arch_place", place)
 
     @classmethod
     def build(cls, case: Case, dentition: Dentition | None = None, collision: CollisionModel | None = None,
@@ -600,9 +608,8 @@ def _onward(model: MovementModel, poses, touching, centers) -> dict[tuple[int, i
     for a, b in touching:
         if (a, b) in model.facing or (b, a) in model.facing or F.arch_of(a) != F.arch_of(b):
             continue
-        order = F.arch_order(F.arch_of(a), set(model.dentition.teeth))
-        ia, ib = order.index(a), order.index(b)
-        for i, j, step_ in ((a, b, np.sign(ib - ia)), (b, a, np.sign(ia - ib))):
+        ia, ib = model.arch_place[a], model.arch_place[b]
+        for i, j, step_ in ((a, b, (ib > ia) - (ib < ia)), (b, a, (ia > ib) - (ia < ib))):
             way = "mesial" if step_ == _arch_step(j, "mesial") else "distal"
             out[(i, j)] = arch_direction(model, poses, j, way, centers)
     return out
