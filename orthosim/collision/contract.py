@@ -38,12 +38,16 @@ class CollisionRequest:
     contact_tolerance_mm: travel tolerance (mm) of the refined time of first contact.
     touch_tolerance_mm: `contacts`: the exact and continuous detectors count two meshes this close
         (mm) as touching.
+    drawn_leaves: continuous detector only. False leaves the result's leaf arrays empty: for a
+        caller that asks only which pairs touch and when (the simulation's detection), placing the
+        leaves for drawing at each pair's time of contact is work for nothing.
     """
 
     all_leaf_pairs: bool = True
     refine_time_of_contact: bool = False
     contact_tolerance_mm: float = 0.05
     touch_tolerance_mm: float = 0.05
+    drawn_leaves: bool = True
 
 
 @dataclass(frozen=True, eq=False)

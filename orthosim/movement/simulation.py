@@ -465,7 +465,7 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
         tcut = {n: 1.0 for n in moves}
         done: set = set()
         request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=True,
-                                   contact_tolerance_mm=s.contact_tolerance_mm)
+                                   contact_tolerance_mm=s.contact_tolerance_mm, drawn_leaves=False)
         for _ in range(s.rounds):
             current = {n: m for n, m in moves.items() if tcut[n] > 0}
             pairs = tested(_scaled(current, tcut), done)
@@ -605,13 +605,17 @@ def _onward(model: MovementModel, poses, touching, centers) -> dict[tuple[int, i
     its own next tooth away from the pusher (the paper's director vector); occlusal pairs: none
     (the contact normal, vertical, is used)."""
     out = {}
+    found: dict[tuple[int, str], np.ndarray] = {}  # (tooth, way) -> its arch direction (a tooth in two contacts)
     for a, b in touching:
         if (a, b) in model.facing or (b, a) in model.facing or F.arch_of(a) != F.arch_of(b):
             continue
         ia, ib = model.arch_place[a], model.arch_place[b]
         for i, j, step_ in ((a, b, (ib > ia) - (ib < ia)), (b, a, (ia > ib) - (ia < ib))):
             way = "mesial" if step_ == _arch_step(j, "mesial") else "distal"
-            out[(i, j)] = arch_direction(model, poses, j, way, centers)
+            d = found.get((j, way))
+            if d is None:
+                d = found[(j, way)] = arch_direction(model, poses, j, way, centers)
+            out[(i, j)] = d
     return out
 
 
