@@ -161,6 +161,15 @@ class CollisionModel:
 
     def pair_indices(self, pairs) -> np.ndarray:
         """(p, 2) body indices of (p, 2) keys."""
+        rows = pairs.tolist() if isinstance(pairs, np.ndarray) and pairs.ndim == 2 else pairs
+        if isinstance(rows, (list, tuple)):  # the usual case, a few dozen pairs: dictionary look-ups
+            index = self.index
+            try:
+                idx = [(index[a], index[b]) for a, b in rows if a != b]
+            except (KeyError, TypeError, ValueError):
+                idx = None
+            if idx is not None and len(idx) == len(rows):
+                return np.array(idx, dtype=np.int64).reshape(-1, 2)
         pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
         same = pairs[:, 0] == pairs[:, 1]
         if same.any():
