@@ -68,6 +68,14 @@ def propagate(applied: Mapping[int, np.ndarray], contacts: Sequence[tuple[int, i
     flow = [(row[i], row[j], n, n if onward is None else np.asarray(onward.get((i, j), n), float), i, j)
             for i, j, n in edges]
     A = np.array([app[t] for t in teeth]).reshape(-1, 3)
+    src = np.array([e[0] for e in flow], dtype=np.int64)
+    normals = np.array([e[2] for e in flow]).reshape(-1, 3, 1)
+
+    def pushing(total: np.ndarray) -> np.ndarray:
+        """(edges,) total[i] @ n_ij of every edge: a stack of 1x3 by 3x1 products, which numpy
+        computes with the very dot product `total[i] @ n_ij` is, one edge at a time."""
+        return (total[src][:, None, :] @ normals).reshape(-1)
+
     received = np.zeros_like(A)
     passed: dict[tuple[int, int], np.ndarray] = {}
     for _ in range(iterations):
@@ -75,8 +83,8 @@ def propagate(applied: Mapping[int, np.ndarray], contacts: Sequence[tuple[int, i
         new = np.zeros_like(A)
         passed = {}
         passes: dict[int, bool] = {}  # can_pass per tooth at this iteration's totals
-        for a, b, n, d, i, j in flow:
-            c = float(total[a] @ n)
+        push = pushing(total).tolist()
+        for (a, b, n, d, i, j), c in zip(flow, push):
             if c <= 0:
                 continue
             ok = passes.get(a)
@@ -92,8 +100,8 @@ def propagate(applied: Mapping[int, np.ndarray], contacts: Sequence[tuple[int, i
     total = A + received
     free, blocked_by = {}, {}
     pushes: dict[int, list[int]] = {}
-    for a, _, n, _, i, j in flow:
-        if float(total[a] @ n) > 0:
+    for (a, _, n, _, i, j), c in zip(flow, pushing(total).tolist()):
+        if c > 0:
             pushes.setdefault(i, []).append(j)
     for t in teeth:
         # the paper: on a collision the moving tooth stops (sideways remainders of forces that meet
