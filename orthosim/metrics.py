@@ -24,11 +24,17 @@ class PairDistance:
     distance_mm: float
 
 
-def tooth_to_tooth_distances(dent: Dentition, poses: Poses | None = None, absent: set[int] = frozenset()) -> list[PairDistance]:
-    """The paper's distance for every adjacent pair of present teeth (extraction spaces bridged)."""
-    centers = dent.crown_centers(poses)
-    return [PairDistance((a, b), float(np.hypot(*(centers[a] - centers[b])[[0, 2]])))
-            for a, b in dent.adjacent_pairs(absent)]
+def tooth_to_tooth_distances(dent: Dentition, poses: Poses | None = None, absent: set[int] = frozenset(),
+                             centers: dict[int, np.ndarray] | None = None) -> list[PairDistance]:
+    """The paper's distance for every adjacent pair of present teeth (extraction spaces bridged).
+    centers: the crown centres at `poses` (`Dentition.crown_centers`) when the caller has them."""
+    if centers is None:
+        centers = dent.crown_centers(poses)
+    pairs = dent.adjacent_pairs(absent)
+    if not pairs:
+        return []
+    gap = np.array([centers[a] for a, _ in pairs]) - np.array([centers[b] for _, b in pairs])
+    return [PairDistance(pair, d) for pair, d in zip(pairs, np.hypot(gap[:, 0], gap[:, 2]).tolist())]
 
 
 def occlusion_summary(dent: Dentition, poses: Poses | None = None) -> dict | None:

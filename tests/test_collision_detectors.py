@@ -285,3 +285,34 @@ def test_false_positive_bands_count_each_separated_pose_once_in_its_band():
     assert bands["0.0-0.1mm"] == {"poses": 2, "rate": 1.0}
     assert bands[">2.0mm"] == {"poses": 1, "rate": 0.0}
     assert bands["1.0-2.0mm"]["rate"] == 0.0
+
+
+def test_times_only_give_the_same_pairs_and_times_without_drawn_leaves(parametric):
+    from orthosim.collision import ExactQueries
+    from orthosim.collision.bench import perturbed_poses
+
+    d, model = parametric
+    start = perturbed_poses(d.rest_poses(), step_mm=1.0, seed=7)
+    end = perturbed_poses(d.rest_poses(), step_mm=1.0, seed=8)
+    for refine in (False, True):
+        q = ExactQueries(model)
+        drawn = detect_step(model, start, end, detector="continuous", queries=q,
+                            request=CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=refine))
+        times = detect_step(model, start, end, detector="continuous", queries=q,
+                            request=CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=refine, drawn_leaves=False))
+        assert drawn.touching.any() and len(drawn.leaf_pairs) > 0
+        assert np.array_equal(times.pairs, drawn.pairs) and np.array_equal(times.touching, drawn.touching)
+        assert np.array_equal(times.time_of_first_contact, drawn.time_of_first_contact, equal_nan=True)
+        assert len(times.leaf_pairs) == len(times.pair_of_leaf) == len(times.centers_a) == 0
+
+
+def test_pair_indices_of_a_list_or_an_array_of_pairs_agree(parametric):
+    d, model = parametric
+    pairs = [(13, 14), (46, 16), (21, 11)]
+    expected = [[model.index[a], model.index[b]] for a, b in pairs]
+    assert model.pair_indices(pairs).tolist() == expected
+    assert model.pair_indices(np.array(pairs)).tolist() == expected
+    assert model.pair_indices(np.array(pairs).ravel()).tolist() == expected
+    assert model.pair_indices([]).shape == (0, 2)
+    with pytest.raises(CollisionError, match="tooth 18"):
+        model.pair_indices(np.array([(17, 18)]))

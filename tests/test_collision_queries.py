@@ -170,3 +170,15 @@ def test_a_pose_path_at_time_zero_is_its_start_pose_without_finding_the_rotation
     assert path.at(0.0).tobytes() == interpolate_pose(T0, T1, 0.0).tobytes()
     assert path._w is None
     assert path.at(0.4).tobytes() == interpolate_pose(T0, T1, 0.4).tobytes()
+
+
+def test_node_centres_of_a_pose_set_are_placed_once_and_equal_the_models():
+    model, poses = boxes(3.5)
+    q = ExactQueries(model)
+    P = model.pose_array(poses)
+    W = q.world_centers(P)
+    assert np.array_equal(W, model.world_centers(P)) and not W.flags.writeable
+    assert q.world_centers(P.copy()) is W  # the same poses (by value): remembered
+    moved = P.copy()
+    moved[1, 0, 3] += 0.25
+    assert np.array_equal(q.world_centers(moved), model.world_centers(moved))

@@ -165,3 +165,27 @@ def test_the_rate_grows_with_the_load_and_saturates():
 def test_a_molar_moves_slower_than_a_premolar_under_the_same_force(dent):
     molar, premolar = build_mechanics(dent.teeth[16]), build_mechanics(dent.teeth[15])
     assert LAW.rate(150.0, molar.root_area_mm2) < LAW.rate(150.0, premolar.root_area_mm2)
+
+
+def test_the_rate_of_one_force_is_the_arrays_number_to_the_last_bit():
+    rng = np.random.default_rng(3)
+    forces = np.concatenate([[0.0, LAW.threshold_cN, LAW.saturation_cN, 1e-300, 1e6], rng.uniform(0, 400, 500)])
+    areas = rng.uniform(40.0, 600.0, len(forces))
+    for law in (LAW, RateLaw(threshold_cN=7.0, saturation_cN=91.0, max_rate_mm_per_day=0.05, reference_root_area_mm2=173.0)):
+        want = law.rate(forces, areas)  # the numpy path, element by element the same operations
+        got = [law.rate(float(f), float(a)) for f, a in zip(forces, areas)]
+        assert all(isinstance(g, float) for g in got)
+        assert np.array_equal(np.array(got), want)
+        assert [law.moves(float(f), float(a)) for f, a in zip(forces, areas)] == list(want > 0)
+
+
+def test_a_motions_turn_is_found_once_per_step_length_and_moves_points_as_before():
+    from orthosim.movement.biomechanics import Motion, _rotation
+
+    m = Motion(np.array([1.0, 2.0, 3.0]), np.array([0.01, 0.0, -0.02]), np.array([0.001, 0.02, -0.003]))
+    R = m.rotation(2.0)
+    assert m.rotation(2.0) is R and np.array_equal(R, _rotation(m.omega * 2.0))
+    assert np.array_equal(m.rotation(30.0), _rotation(m.omega * 30.0))
+    p = np.array([[4.0, -1.0, 2.5]])
+    expected = (p - m.pivot) @ _rotation(m.omega * 30.0).T + m.pivot + m.velocity * 30.0 - p
+    assert np.array_equal(m.displacement(p, 30.0), expected)

@@ -110,3 +110,13 @@ movement = "translation"
     moved = {n: np.linalg.norm(recs[-1].poses[n][:3, 3] - recs[0].poses[n][:3, 3]) for n in (15, 16, 17, 13)}
     assert moved[13] == 0.0
     assert moved[16] > 0.5 * moved[15] and moved[17] > 0.5 * moved[15]  # the chain closes up behind it
+
+
+def test_the_stacked_push_of_every_edge_is_each_edges_own_dot_product_to_the_last_bit():
+    # propagate finds total[i] @ n_ij of all edges in one stacked product: it must be numpy's very
+    # dot product of each pair (a sum written out, or einsum, differs in the last bit)
+    rng = np.random.default_rng(11)
+    total = rng.normal(size=(5000, 3)) * rng.uniform(0, 300, (5000, 1))
+    n = rng.normal(size=(5000, 3))
+    stacked = (total[:, None, :] @ n[:, :, None]).reshape(-1)
+    assert np.array_equal(stacked, np.array([t @ m for t, m in zip(total, n)]))

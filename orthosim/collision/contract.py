@@ -38,12 +38,16 @@ class CollisionRequest:
     contact_tolerance_mm: travel tolerance (mm) of the refined time of first contact.
     touch_tolerance_mm: `contacts`: the exact and continuous detectors count two meshes this close
         (mm) as touching.
+    drawn_leaves: continuous detector only. False leaves the result's leaf arrays empty: for a
+        caller that asks only which pairs touch and when (the simulation's detection), placing the
+        leaves for drawing at each pair's time of contact is work for nothing.
     """
 
     all_leaf_pairs: bool = True
     refine_time_of_contact: bool = False
     contact_tolerance_mm: float = 0.05
     touch_tolerance_mm: float = 0.05
+    drawn_leaves: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,7 +115,7 @@ class StepResult:
         return float(np.nanmin(t))
 
     def touching_pairs(self) -> list[tuple[int, int]]:
-        return [(int(a), int(b)) for (a, b), hit in zip(self.pairs, self.touching) if hit]
+        return [(a, b) for (a, b), hit in zip(self.pairs.tolist(), self.touching.tolist()) if hit]
 
     def pair(self, i: int) -> PairResult:
         """The result of pair i alone."""

@@ -55,7 +55,8 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
     pairs: (FDI a, FDI b) to test; the broad phase (`default_pairs`) when None.
     detector: "circles", "discrete", "continuous" or "exact".
     queries: the run's `ExactQueries` of this model, for the exact detector and the refinement of
-        the continuous detector's time of contact (one is made for this call when None).
+        the continuous detector's time of contact (one is made for this call when None); the sphere
+        trees' node centres are then placed through its memo (a step places the same poses twice).
     """
     if detector not in DETECTORS:
         raise CollisionError(None, "detector", f"unknown detector {detector!r}", f"use one of {', '.join(DETECTORS)}")
@@ -81,13 +82,14 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
         return _exact_step(P1, pairs_arr, pair_idx, request, queries or ExactQueries(model))
     first_only = not request.all_leaf_pairs
     if detector == "discrete":
-        W = model.world_centers(P1)
+        W = queries.world_centers(P1) if queries is not None else model.world_centers(P1)
         pair, la, lb = overlapping_leaves(model, P1, pair_idx, first_only, world=W)
         touching = np.zeros(p, bool)
         touching[pair] = True
         return StepResult("discrete", pairs_arr, touching, nan, **_leaf_arrays(model, pair_idx, pair, la, lb, P1, P1, W=W))
     # continuous
-    W0, W1 = model.world_centers(P0), model.world_centers(P1)
+    place = queries.world_centers if queries is not None else model.world_centers
+    W0, W1 = place(P0), place(P1)
     pair, la, lb, t, leave = swept_leaves(model, P0, P1, pair_idx, first_only, world0=W0, world1=W1)
     toc = np.full(p, np.inf)
     np.minimum.at(toc, pair, t)
@@ -99,6 +101,8 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
             r = refine_time_of_contact(model, a, b, P0[a], P1[a], P0[b], P1[b], toc[i], request.contact_tolerance_mm,
                                        queries=queries)
             toc[i] = np.nan if r is None else r
+    if not request.drawn_leaves:
+        return StepResult("continuous", pairs_arr, ~np.isnan(toc), toc, **empty_leaves())
     # the contact regions drawn are the leaf pairs overlapping when their pair first touches
     at = toc[pair]
     live = (t <= at) & (at <= leave)
@@ -198,7 +202,7 @@ def contacts(model: CollisionModel, poses: Mapping[int, np.ndarray], request: Co
         centers, radii = np.zeros((0, 3)), np.zeros(0)
     else:
         res = detect_step(model, poses, None, pairs, "circles" if detector == "circles" else "discrete",
-                          CollisionRequest(all_leaf_pairs=True))
+                          CollisionRequest(all_leaf_pairs=True), queries=queries)
         touching = res.touching_pairs()
         if detector != "circles":
             may_meet = touching

@@ -107,6 +107,9 @@ class CollisionModel:
         self.split_key = np.where(self.child_count > 0, self.radii, -1.0).astype(np.float32)
         self._circle = _circle_data(self.bodies)
         self.rho_max = np.array([np.linalg.norm(b.mesh.vertices, axis=1).max() for b in self.bodies])
+        self._rest = np.stack([b.rest_pose for b in self.bodies]).astype(float)  # (n, 4, 4)
+        self._keys = np.array([b.key for b in self.bodies], dtype=np.int64)
+        self._key_order = np.argsort(self._keys)
 
     def roots(self, body_idx: np.ndarray) -> np.ndarray:
         """Flat node index of the root of each body."""
@@ -158,13 +161,21 @@ class CollisionModel:
 
     def pair_indices(self, pairs) -> np.ndarray:
         """(p, 2) body indices of (p, 2) keys."""
+        rows = pairs.tolist() if isinstance(pairs, np.ndarray) and pairs.ndim == 2 else pairs
+        if isinstance(rows, (list, tuple)):  # the usual case, a few dozen pairs: dictionary look-ups
+            index = self.index
+            try:
+                idx = [(index[a], index[b]) for a, b in rows if a != b]
+            except (KeyError, TypeError, ValueError):
+                idx = None
+            if idx is not None and len(idx) == len(rows):
+                return np.array(idx, dtype=np.int64).reshape(-1, 2)
         pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
         same = pairs[:, 0] == pairs[:, 1]
         if same.any():
             raise CollisionError(None, f"pair ({pairs[same][0, 0]}, {pairs[same][0, 0]})", "pairs a tooth with itself",
                                  "list pairs of two different teeth")
-        keys = np.array([b.key for b in self.bodies], dtype=np.int64)
-        order = np.argsort(keys)
+        keys, order = self._keys, self._key_order
         pos = np.clip(np.searchsorted(keys[order], pairs), 0, len(keys) - 1)
         idx = order[pos]
         missing = keys[idx] != pairs
@@ -174,7 +185,7 @@ class CollisionModel:
 
     def pose_array(self, poses: Mapping[int, np.ndarray], keys=None) -> np.ndarray:
         """(n_bodies, 4, 4) poses in body order; bodies missing from `poses` keep their rest pose."""
-        out = np.stack([b.rest_pose for b in self.bodies]).astype(float)
+        out = self._rest.copy()
         for k, T in poses.items():
             i = self.index.get(int(k))
             if i is not None:

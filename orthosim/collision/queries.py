@@ -47,6 +47,7 @@ from .model import CollisionModel
 
 APART_MARGIN_MM = 1e-6  # a pair proved apart by less than this is tested with FCL all the same
 PATCH_REACH_MM = 0.5  # a pair's patches hold every face within this of the other tooth when cut
+WORLD_MEMO = 4  # pose sets whose sphere-tree node centres `world_centers` keeps
 
 
 class _Patch:
@@ -92,6 +93,7 @@ class ExactQueries:
         self._patches: dict[tuple[int, int], _Patch] = {}
         self._faces: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._trees: dict[int, object] = {}
+        self._world: OrderedDict[bytes, np.ndarray] = OrderedDict()
 
     # ------------------------------------------------------------------ by FDI pair and poses
     def intersects(self, pair: tuple[int, int], poses: Mapping[int, np.ndarray]) -> bool:
@@ -119,6 +121,22 @@ class ExactQueries:
             if hit:
                 out[(a, b)] = depth
         return out
+
+    def world_centers(self, poses: np.ndarray) -> np.ndarray:
+        """`CollisionModel.world_centers(poses)` ((n, 4, 4) in body order), read-only, the last
+        `WORLD_MEMO` pose sets remembered by their bytes: a step places its end poses for its
+        detection and again for its contacts, and the next step starts from them."""
+        key = _bytes(poses)
+        W = self._world.get(key)
+        if W is None:
+            W = self.model.world_centers(poses)
+            W.flags.writeable = False
+            self._world[key] = W
+            if len(self._world) > WORLD_MEMO:
+                self._world.popitem(last=False)
+        else:
+            self._world.move_to_end(key)
+        return W
 
     # ------------------------------------------------------------------ by body index and pose
     def object(self, i: int):

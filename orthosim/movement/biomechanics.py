@@ -38,6 +38,7 @@ A couple acting alone turns the tooth as fast as the force M / d at the bracket 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,7 +64,14 @@ class RateLaw:
     reference_root_area_mm2: float = 200.0
 
     def rate(self, force_cN, root_area_mm2) -> np.ndarray:
-        """mm/day for a force magnitude (cN, scalar or array) on a root of `root_area_mm2` (mm^2)."""
+        """mm/day for a force magnitude (cN, scalar or array) on a root of `root_area_mm2` (mm^2)
+        (a float for a float force and area: the same IEEE operations without numpy's per-call cost)."""
+        if isinstance(force_cN, float) and isinstance(root_area_mm2, float):
+            x = (force_cN * self.reference_root_area_mm2 / root_area_mm2 - self.threshold_cN) / (
+                self.saturation_cN - self.threshold_cN)
+            if x != x:
+                return math.nan
+            return self.max_rate_mm_per_day * (0.0 if x < 0.0 else 1.0 if x > 1.0 else x)
         f_eff = np.asarray(force_cN, float) * self.reference_root_area_mm2 / np.asarray(root_area_mm2, float)
         s = np.clip((f_eff - self.threshold_cN) / (self.saturation_cN - self.threshold_cN), 0.0, 1.0)
         return self.max_rate_mm_per_day * s
@@ -174,17 +182,27 @@ class Motion:
 
     @property
     def is_still(self) -> bool:
-        return not (np.any(self.velocity) or np.any(self.omega))
+        return not (self.velocity.any() or self.omega.any())
 
     def displacement(self, points: np.ndarray, dt_days: float) -> np.ndarray:
         """(n, 3) mm: how far each arch-frame point (n, 3) of the tooth moves in dt_days."""
-        R = _rotation(self.omega * dt_days)
+        R = self.rotation(dt_days)
         p = np.asarray(points, float).reshape(-1, 3)
         return (p - self.pivot) @ R.T + self.pivot + self.velocity * dt_days - p
 
+    def rotation(self, dt_days: float) -> np.ndarray:
+        """(3, 3) the turn made in dt_days (the last one asked is kept: a step asks for the same
+        one many times; the motion is frozen, so it cannot go stale)."""
+        known = self.__dict__.get("_turn")
+        if known is not None and known[0] == dt_days:
+            return known[1]
+        R = _rotation(self.omega * dt_days)
+        object.__setattr__(self, "_turn", (dt_days, R))
+        return R
+
     def apply(self, pose: np.ndarray, dt_days: float) -> np.ndarray:
         """(4, 4) pose after dt_days of this motion, from `pose` (4, 4, local -> arch frame, mm)."""
-        R = _rotation(self.omega * dt_days)
+        R = self.rotation(dt_days)
         M = np.eye(4)
         M[:3, :3] = R
         M[:3, 3] = self.pivot + self.velocity * dt_days - R @ self.pivot

@@ -60,32 +60,55 @@ def propagate(applied: Mapping[int, np.ndarray], contacts: Sequence[tuple[int, i
     for i, j, n in contacts:
         n = np.asarray(n, float)
         edges += [(i, j, n), (j, i, -n)]
-    teeth = set(applied) | {e[0] for e in edges} | {e[1] for e in edges}
+    teeth = list(set(applied) | {e[0] for e in edges} | {e[1] for e in edges})
+    row = {t: k for k, t in enumerate(teeth)}
     zero = np.zeros(3)
     app = {t: np.asarray(applied.get(t, zero), float) for t in teeth}
-    received = {t: zero.copy() for t in teeth}
+    # per edge: source row, target row, n_ij, the direction of the force passed on
+    flow = [(row[i], row[j], n, n if onward is None else np.asarray(onward.get((i, j), n), float), i, j)
+            for i, j, n in edges]
+    A = np.array([app[t] for t in teeth]).reshape(-1, 3)
+    src = np.array([e[0] for e in flow], dtype=np.int64)
+    normals = np.array([e[2] for e in flow]).reshape(-1, 3, 1)
+
+    def pushing(total: np.ndarray) -> np.ndarray:
+        """(edges,) total[i] @ n_ij of every edge: a stack of 1x3 by 3x1 products, which numpy
+        computes with the very dot product `total[i] @ n_ij` is, one edge at a time."""
+        return (total[src][:, None, :] @ normals).reshape(-1)
+
+    received = np.zeros_like(A)
     passed: dict[tuple[int, int], np.ndarray] = {}
     for _ in range(iterations):
-        total = {t: app[t] + received[t] for t in teeth}
-        new = {t: zero.copy() for t in teeth}
+        total = A + received
+        new = np.zeros_like(A)
         passed = {}
-        for i, j, n in edges:
-            c = float(total[i] @ n)
-            if c > 0 and can_pass(i, length(total[i])):
-                d = n if onward is None else np.asarray(onward.get((i, j), n), float)
+        passes: dict[int, bool] = {}  # can_pass per tooth at this iteration's totals
+        push = pushing(total).tolist()
+        for (a, b, n, d, i, j), c in zip(flow, push):
+            if c <= 0:
+                continue
+            ok = passes.get(a)
+            if ok is None:
+                ok = passes[a] = can_pass(i, length(total[a]))
+            if ok:
                 passed[(i, j)] = share * c * d
-                new[j] += passed[(i, j)]
-        delta = max((float(np.abs(new[t] - received[t]).max()) for t in teeth), default=0.0)
+                new[b] += passed[(i, j)]
+        delta = float(np.abs(new - received).max()) if len(teeth) else 0.0
         received = new
         if delta < tol_cN:
             break
-    total = {t: app[t] + received[t] for t in teeth}
+    total = A + received
     free, blocked_by = {}, {}
+    pushes: dict[int, list[int]] = {}
+    for (a, _, n, _, i, j), c in zip(flow, pushing(total).tolist()):
+        if c > 0:
+            pushes.setdefault(i, []).append(j)
     for t in teeth:
-        pushes = [j for i, j, n in edges if i == t and float(total[t] @ n) > 0]
         # the paper: on a collision the moving tooth stops (sideways remainders of forces that meet
         # along a curved arch would otherwise slide it out of the arch)
-        free[t] = np.zeros(3) if pushes else total[t].copy()
-        if pushes:
-            blocked_by[t] = pushes
-    return ForceBalance(app, received, total, free, blocked_by, passed)
+        k = row[t]
+        free[t] = np.zeros(3) if t in pushes else total[k].copy()
+        if t in pushes:
+            blocked_by[t] = pushes[t]
+    return ForceBalance(app, {t: received[row[t]].copy() for t in teeth}, {t: total[row[t]].copy() for t in teeth},
+                        free, blocked_by, passed)

@@ -116,6 +116,14 @@ class MovementModel:
     facing: frozenset[tuple[int, int]] = field(default_factory=frozenset)
     total_mass_g: float = 0.0
     arch_orders: dict[F.Arch, list[int]] = field(default_factory=dict)  # present teeth, right to left
+    # FDI -> its place along its arch among the dentition's teeth (extracted ones included), right to left
+    arch_place: dict[int, int] = field(init=False, repr=False)
+
+    def __post_init__(self):
+        place = {}
+        for arch in F.Arch:
+            place.update((t, k) for k, t in enumerate(F.arch_order(arch, set(self.dentition.teeth))))
+        object.__setattr__(self, "arch_place", place)
 
     @classmethod
     def build(cls, case: Case, dentition: Dentition | None = None, collision: CollisionModel | None = None,
@@ -241,6 +249,7 @@ class StepState:
     detector: the run's detector. queries: the run's exact queries and their memos (`ExactQueries`).
     bite: pairs of facing teeth in contact in the initial state (the bite as the model stands): they
         may slide by `occlusal_slide_mm`; contacts the run makes get the touch tolerance.
+    centers: FDI -> (3,) crown centres at `poses` (`Dentition.crown_centers`; found when None).
     """
 
     step: int
@@ -251,6 +260,7 @@ class StepState:
     detector: str
     queries: ExactQueries
     bite: frozenset[tuple[int, int]] = frozenset()
+    centers: Mapping[int, np.ndarray] | None = None
 
     def slide_allowance(self, model: "MovementModel", pair: tuple[int, int]) -> float:
         """mm a facing pair may sink below the rest state while its cusps slide along each other."""
@@ -294,7 +304,8 @@ def initial_state(model: MovementModel, detector: str, queries: ExactQueries | N
     P = {n: np.asarray(T, float).copy() for n, T in model.dentition.rest_poses().items()}
     found = contacts(model.collision, P, _touch_request(model), queries, model.pairs, detector)
     bite = frozenset(p for p in found.touching if p in model.facing)
-    state = StepState(0, 0.0, P, found.touching, found.penetration, detector, queries, bite)
+    state = StepState(0, 0.0, P, found.touching, found.penetration, detector, queries, bite,
+                      model.dentition.crown_centers(P))
     return state, _record(model, state, frozenset(), found, (), None)
 
 
@@ -324,12 +335,14 @@ def motions(model: MovementModel, state: StepState, f: Forces, centers: Mapping[
     wire = model.case.wire.type
     out: dict[int, Motion] = {}
     for n in model.present:
-        free = balance.free.get(n, np.zeros(3))
-        own = f.loads.get(n, [])
-        couple = sum((a.couple_cNmm for a in own), np.zeros(3))
-        if not np.any(free) and not np.any(couple):
+        free = balance.free.get(n)
+        own = f.loads.get(n, ())
+        couple = sum((a.couple_cNmm for a in own), np.zeros(3)) if own else np.zeros(3)
+        if (free is None or not free.any()) and not couple.any():
             continue
-        if own and any(np.any(a.force_cN) for a in own):
+        if free is None:
+            free = np.zeros(3)
+        if own and any(a.force_cN.any() for a in own):
             w = np.array([length(a.force_cN) for a in own])
             point = sum(wi * a.point_mm for wi, a in zip(w, own)) / max(w.sum(), 1e-12)
         else:
@@ -341,12 +354,16 @@ def motions(model: MovementModel, state: StepState, f: Forces, centers: Mapping[
     if wire != "rectangular":
         return out
     # a tooth blocked by a neighbour that moves away follows it, as far as its own push would take it
+    settled: dict[tuple[int, int], tuple] = {}  # (i, j) -> the motions (of j, of i) it last left unchanged
     for _ in range(len(model.present)):
         changed = False
         for i, blockers in balance.blocked_by.items():
             for j in blockers:
                 if j not in out:
                     continue
+                seen = settled.get((i, j))
+                if seen is not None and seen[0] is out[j] and seen[1] is out.get(i):
+                    continue  # the same motions (frozen) as when this pair last changed nothing
                 n_ij = _normal(model, (i, j), centers)
                 p = 0.5 * (centers[i] + centers[j])
                 away = float(out[j].displacement(p, dt)[0] @ n_ij) / dt
@@ -359,6 +376,8 @@ def motions(model: MovementModel, state: StepState, f: Forces, centers: Mapping[
                 if target > cur + 1e-12:
                     out[i] = Motion(mi.pivot, mi.velocity + (target - cur) * n_ij, mi.omega)
                     changed = True
+                else:
+                    settled[(i, j)] = (out[j], out.get(i))
         if not changed:
             break
     return out
@@ -403,7 +422,7 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
         tcut = {n: 1.0 for n in moves}
         done: set = set()
         request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=True,
-                                   contact_tolerance_mm=s.contact_tolerance_mm)
+                                   contact_tolerance_mm=s.contact_tolerance_mm, drawn_leaves=False)
         for _ in range(s.rounds):
             current = {n: m for n, m in moves.items() if tcut[n] > 0}
             pairs = tested(_scaled(current, tcut), done)
@@ -495,7 +514,7 @@ def response(model: MovementModel, state: StepState, moves: dict[int, Motion], d
 
 def step(model: MovementModel, state: StepState) -> tuple[StepState, StepRecord]:
     """One step of `case.step_days`: forces, motions, detection, contacts, response."""
-    centers = model.dentition.crown_centers(state.poses)
+    centers = state.centers if state.centers is not None else model.dentition.crown_centers(state.poses)
     f = forces(model, state, centers)
     moves = motions(model, state, f, centers)
     detected = detection(model, state, moves, centers)
@@ -505,7 +524,7 @@ def step(model: MovementModel, state: StepState) -> tuple[StepState, StepRecord]
     events = response(model, state, moves, detected, found, centers)
     k = state.step + 1
     new = StepState(k, k * float(model.case.step_days), P, found.touching, state.rest_depths, state.detector, state.queries,
-                    state.bite)
+                    state.bite, model.dentition.crown_centers(P))
     return new, _record(model, new, moved, found, events, f.balance)
 
 
@@ -523,7 +542,7 @@ def _record(model: MovementModel, state: StepState, moved: frozenset[int], found
         collisions=events,
         forces=balance,
         max_penetration_mm=max(0.0, _deepening(depths, state.rest_depths)) if state.step else 0.0,
-        distances=tuple(tooth_to_tooth_distances(model.dentition, state.poses, set(model.extracted))),
+        distances=tuple(tooth_to_tooth_distances(model.dentition, state.poses, set(model.extracted), state.centers)),
         raw_penetration_mm=max(depths.values(), default=0.0),
         penetrating=_deepest_first(depths),
     )
@@ -543,14 +562,17 @@ def _onward(model: MovementModel, poses, touching, centers) -> dict[tuple[int, i
     its own next tooth away from the pusher (the paper's director vector); occlusal pairs: none
     (the contact normal, vertical, is used)."""
     out = {}
+    found: dict[tuple[int, str], np.ndarray] = {}  # (tooth, way) -> its arch direction (a tooth in two contacts)
     for a, b in touching:
         if (a, b) in model.facing or (b, a) in model.facing or F.arch_of(a) != F.arch_of(b):
             continue
-        order = F.arch_order(F.arch_of(a), set(model.dentition.teeth))
-        ia, ib = order.index(a), order.index(b)
-        for i, j, step_ in ((a, b, np.sign(ib - ia)), (b, a, np.sign(ia - ib))):
+        ia, ib = model.arch_place[a], model.arch_place[b]
+        for i, j, step_ in ((a, b, (ib > ia) - (ib < ia)), (b, a, (ia > ib) - (ia < ib))):
             way = "mesial" if step_ == _arch_step(j, "mesial") else "distal"
-            out[(i, j)] = arch_direction(model, poses, j, way, centers)
+            d = found.get((j, way))
+            if d is None:
+                d = found[(j, way)] = arch_direction(model, poses, j, way, centers)
+            out[(i, j)] = d
     return out
 
 
