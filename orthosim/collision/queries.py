@@ -153,11 +153,6 @@ class ExactQueries:
         meshquery.set_pose(obj, pose)
         return obj
 
-    def prepare(self, keys: Iterable[int]) -> None:
-        """Build the FCL objects of these bodies (keys) now rather than at their first query."""
-        for k in keys:
-            self.object(self.model.index[int(k)])
-
     def body_intersects(self, i: int, pose_i: np.ndarray, j: int, pose_j: np.ndarray) -> bool:
         M = _relative(pose_i, pose_j)
         if self._apart(i, j, M):
