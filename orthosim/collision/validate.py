@@ -141,6 +141,57 @@ def _near_contact_pose(model, rng, i, j, lo, hi):
             return _pose(Ra, np.zeros(3)), _pose(Rb, (s_c + off) * u), off, u
 
 
+@dataclass(frozen=True)
+class DiscretePoses:
+    """Near-contact poses of tooth pairs, labelled by the exact mesh test (one tooth set's draw).
+
+    pair (p, 2) body indices into the model the poses were drawn with; Ta, Tb (p, 4, 4) poses;
+    offset (p,) mm from first contact; hit (p,) exact intersection; distance (p,) mm, exact (0
+    where intersecting)."""
+
+    pair: np.ndarray
+    Ta: np.ndarray
+    Tb: np.ndarray
+    offset: np.ndarray
+    hit: np.ndarray
+    distance: np.ndarray
+    seconds: float
+
+
+def draw_discrete_poses(model: CollisionModel, ts: ToothSet, idx: Sequence[int], n_poses: int, rng,
+                        offset_range=(-OFFSET_MM, OFFSET_MM)) -> DiscretePoses:
+    """n_poses random near-contact poses of pairs of `ts` (bodies `idx` of `model`), labelled by FCL.
+
+    The draw depends on the meshes only (never on the sphere trees), so trees built differently can be
+    compared on the very same poses (`paired_false_positives`)."""
+    pairs = _pairs_of(ts)
+    t0 = time.perf_counter()
+    recs = []
+    for k in range(n_poses):
+        i, j = pairs[rng.integers(len(pairs))]
+        Ta, Tb, off, _ = _near_contact_pose(model, rng, idx[i], idx[j], *offset_range)
+        oa, ob = _object(model, idx[i]), _object(model, idx[j])
+        exact.set_pose(oa, Ta)
+        exact.set_pose(ob, Tb)
+        hit = exact.collide(oa, ob)[0]
+        dist = 0.0 if hit else exact.distance(oa, ob)
+        recs.append((idx[i], idx[j], Ta, Tb, off, hit, dist))
+    return DiscretePoses(pair=np.array([[r[0], r[1]] for r in recs], dtype=np.int64).reshape(-1, 2),
+                         Ta=np.stack([r[2] for r in recs]), Tb=np.stack([r[3] for r in recs]),
+                         offset=np.array([r[4] for r in recs]), hit=np.array([r[5] for r in recs], dtype=bool),
+                         distance=np.array([r[6] for r in recs]), seconds=time.perf_counter() - t0)
+
+
+def detect_discrete(model: CollisionModel, poses: DiscretePoses, batch: int = 2000) -> np.ndarray:
+    """(p,) bool: the poses the discrete sphere-tree detector calls touching (the model's trees)."""
+    found = np.zeros(len(poses.pair), bool)
+    for s in range(0, len(found), batch):
+        sl = slice(s, s + batch)
+        pair, _, _ = overlapping_leaves_posed(model, poses.pair[sl], poses.Ta[sl], poses.Tb[sl], first_only=True)
+        found[s + pair] = True
+    return found
+
+
 def discrete_study(tooth_sets: Sequence[ToothSet], n_poses: int, tree_builder=None, seed: int = 0,
                    offset_range=(-OFFSET_MM, OFFSET_MM), batch: int = 2000) -> dict:
     """False negatives and false-positive rates of the discrete sphere-tree detector vs FCL.
@@ -152,35 +203,14 @@ def discrete_study(tooth_sets: Sequence[ToothSet], n_poses: int, tree_builder=No
     rng = np.random.default_rng(seed)
     out = {"offset_range_mm": list(offset_range), "sets": {}}
     for ts, idx in zip(tooth_sets, index):
-        pairs = _pairs_of(ts)
+        poses = draw_discrete_poses(model, ts, idx, n_poses, rng, offset_range)
+        hit, dist, offset, pair_idx = poses.hit, poses.distance, poses.offset, poses.pair
         t0 = time.perf_counter()
-        recs = []
-        for k in range(n_poses):
-            i, j = pairs[rng.integers(len(pairs))]
-            Ta, Tb, off, _ = _near_contact_pose(model, rng, idx[i], idx[j], *offset_range)
-            oa, ob = _object(model, idx[i]), _object(model, idx[j])
-            exact.set_pose(oa, Ta)
-            exact.set_pose(ob, Tb)
-            hit = exact.collide(oa, ob)[0]
-            dist = 0.0 if hit else exact.distance(oa, ob)
-            recs.append((idx[i], idx[j], Ta, Tb, off, hit, dist))
-        t_exact = time.perf_counter() - t0
-        pair_idx = np.array([[r[0], r[1]] for r in recs])
-        Ta = np.stack([r[2] for r in recs])
-        Tb = np.stack([r[3] for r in recs])
-        hit = np.array([r[5] for r in recs])
-        dist = np.array([r[6] for r in recs])
-        offset = np.array([r[4] for r in recs])
-        found = np.zeros(len(recs), bool)
-        t0 = time.perf_counter()
-        for s in range(0, len(recs), batch):
-            sl = slice(s, s + batch)
-            pair, _, _ = overlapping_leaves_posed(model, pair_idx[sl], Ta[sl], Tb[sl], first_only=True)
-            found[s + pair] = True
+        found = detect_discrete(model, poses, batch)
         t_det = time.perf_counter() - t0
         fn = hit & ~found
         out["sets"][ts.name] = {
-            "poses": int(len(recs)),
+            "poses": int(len(hit)),
             "exact_intersecting": int(hit.sum()),
             "false_negatives": int(fn.sum()),
             "false_negative_examples": [
@@ -193,9 +223,63 @@ def discrete_study(tooth_sets: Sequence[ToothSet], n_poses: int, tree_builder=No
             },
             "false_positive_rate_by_band": false_positive_bands(dist, found),
             "detector_seconds": t_det,
-            "exact_labelling_seconds": t_exact,
+            "exact_labelling_seconds": poses.seconds,
         }
     return out
+
+
+def paired_false_positives(tooth_sets: Sequence[ToothSet], tree_builders: dict, n_poses: int,
+                           seeds: Sequence[int] = (0,), offset_range=(-OFFSET_MM, OFFSET_MM),
+                           band=(0.1, 0.25)) -> dict:
+    """Several tree builders on the very same poses: per seed and pooled (over the seeds, and per
+    tooth set), each builder's false negatives and false-positive rate in `band` (mm), and against
+    the first builder (the baseline) how many poses in the band flip from false positive to true
+    negative and back.
+
+    tree_builders: name -> (mesh -> SphereTree), the baseline first. n_poses per tooth set and seed.
+    Poses are drawn with the meshes alone (`draw_discrete_poses`); the trees only answer them."""
+    names = list(tree_builders)
+    models = {}
+    for name in names:
+        models[name], index = _model(tooth_sets, tree_builders[name])
+    lo, hi = band
+    per_seed, pooled = {}, {name: {"in_band": 0, "false_positives": 0, "false_negatives": 0} for name in names}
+    per_set = {ts.name: {name: {"in_band": 0, "false_positives": 0} for name in names} for ts in tooth_sets}
+    flips = {name: {"fp_to_tn": 0, "tn_to_fp": 0} for name in names[1:]}
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        rows = {name: {"in_band": 0, "false_positives": 0, "false_negatives": 0} for name in names}
+        seed_flips = {name: {"fp_to_tn": 0, "tn_to_fp": 0} for name in names[1:]}
+        for ts, idx in zip(tooth_sets, index):
+            poses = draw_discrete_poses(models[names[0]], ts, idx, n_poses, rng, offset_range)
+            sel = (poses.distance > lo) & (poses.distance <= hi)
+            found = {name: detect_discrete(models[name], poses) for name in names}
+            for name in names:
+                per_set[ts.name][name]["in_band"] += int(sel.sum())
+                per_set[ts.name][name]["false_positives"] += int((found[name] & sel).sum())
+                rows[name]["in_band"] += int(sel.sum())
+                rows[name]["false_positives"] += int((found[name] & sel).sum())
+                rows[name]["false_negatives"] += int((poses.hit & ~found[name]).sum())
+            for name in names[1:]:
+                seed_flips[name]["fp_to_tn"] += int((sel & found[names[0]] & ~found[name]).sum())
+                seed_flips[name]["tn_to_fp"] += int((sel & ~found[names[0]] & found[name]).sum())
+        for name in names:
+            rows[name]["rate"] = rows[name]["false_positives"] / rows[name]["in_band"] if rows[name]["in_band"] else None
+            for key in ("in_band", "false_positives", "false_negatives"):
+                pooled[name][key] += rows[name][key]
+        for name in names[1:]:
+            for key in ("fp_to_tn", "tn_to_fp"):
+                flips[name][key] += seed_flips[name][key]
+        per_seed[str(seed)] = {"builders": rows, "flips_against_baseline": seed_flips}
+    for name in names:
+        n, k = pooled[name]["in_band"], pooled[name]["false_positives"]
+        pooled[name]["rate"] = k / n if n else None
+        pooled[name]["rate_standard_error"] = float(np.sqrt(k / n * (1 - k / n) / n)) if n else None
+    for rows in per_set.values():
+        for row in rows.values():
+            row["rate"] = row["false_positives"] / row["in_band"] if row["in_band"] else None
+    return {"band_mm": [lo, hi], "poses_per_set_and_seed": n_poses, "baseline": names[0],
+            "seeds": per_seed, "pooled": pooled, "pooled_per_set": per_set, "flips_against_baseline": flips}
 
 
 def dense_first_contact(oa, ob, T0a, T1a, T0b, T1b, samples: int = 400, bisections: int = 30):
