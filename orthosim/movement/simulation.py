@@ -52,7 +52,7 @@ from ..dentition import Dentition
 from ..detectors import DETECTORS
 from ..errors import CaseError
 from ..interpenetration import default_occlusal_slide_mm
-from ..metrics import PairDistance, tooth_to_tooth_distances
+from ..metrics import tooth_to_tooth_distances
 from .biomechanics import Motion, RateLaw, ToothMechanics, build_mechanics, tooth_motion
 from .impact import Body, impact
 from .propagation import ForceBalance, propagate
