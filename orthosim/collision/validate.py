@@ -264,7 +264,7 @@ def paired_false_positives(tooth_sets: Sequence[ToothSet], tree_builders: dict, 
                 seed_flips[name]["fp_to_tn"] += int((sel & found[names[0]] & ~found[name]).sum())
                 seed_flips[name]["tn_to_fp"] += int((sel & ~found[names[0]] & found[name]).sum())
         for name in names:
-            rows[name]["rate"] = rows[name]["false_positives"] / rows[name]["in_band"] if rows[name]["in_band"] else None
+            rows[name]["rate"] = _rate(rows[name])
             for key in ("in_band", "false_positives", "false_negatives"):
                 pooled[name][key] += rows[name][key]
         for name in names[1:]:
@@ -273,13 +273,18 @@ def paired_false_positives(tooth_sets: Sequence[ToothSet], tree_builders: dict, 
         per_seed[str(seed)] = {"builders": rows, "flips_against_baseline": seed_flips}
     for name in names:
         n, k = pooled[name]["in_band"], pooled[name]["false_positives"]
-        pooled[name]["rate"] = k / n if n else None
+        pooled[name]["rate"] = _rate(pooled[name])
         pooled[name]["rate_standard_error"] = float(np.sqrt(k / n * (1 - k / n) / n)) if n else None
     for rows in per_set.values():
         for row in rows.values():
-            row["rate"] = row["false_positives"] / row["in_band"] if row["in_band"] else None
+            row["rate"] = _rate(row)
     return {"band_mm": [lo, hi], "poses_per_set_and_seed": n_poses, "baseline": names[0],
             "seeds": per_seed, "pooled": pooled, "pooled_per_set": per_set, "flips_against_baseline": flips}
+
+
+def _rate(row: dict) -> float | None:
+    """False positives over the poses in the band, None when the band holds none."""
+    return row["false_positives"] / row["in_band"] if row["in_band"] else None
 
 
 def dense_first_contact(oa, ob, T0a, T1a, T0b, T1b, samples: int = 400, bisections: int = 30):

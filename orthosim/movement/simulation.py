@@ -337,7 +337,7 @@ def motions(model: MovementModel, state: StepState, f: Forces, centers: Mapping[
     for n in model.present:
         free = balance.free.get(n)
         own = f.loads.get(n, ())
-        couple = sum((a.couple_cNmm for a in own), np.zeros(3)) if own else np.zeros(3)
+        couple = sum((a.couple_cNmm for a in own), np.zeros(3))
         if (free is None or not free.any()) and not couple.any():
             continue
         if free is None:
