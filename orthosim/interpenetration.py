@@ -74,7 +74,7 @@ def pair_depth(mesh_a, pose_a, mesh_b, pose_b) -> float:
 def start_depths(dentition: Dentition, penetrating, poses) -> list[tuple[tuple[int, int], float]]:
     """The depth of each pair interpenetrating at a run's start, deepest first: the larger of the
     run's own reading (`penetrating`: ((a, b), mm) for the pairs whose meshes intersect, from its
-    exact queries, vertex-based: 0 for two teeth at the same place) and `pair_depth` at `poses`, or
+    exact queries, on vertices and edges: about 0 for two teeth at the same place) and `pair_depth` at `poses`, or
     for a pair at its rest poses the depth measured at load (`info["rest_interpenetration_mm"]`)."""
     import numpy as np
 

@@ -78,6 +78,37 @@ def test_contacts_report_interpenetration_and_the_drawn_leaves():
     assert len(found.centers) == len(found.radii) > 0
 
 
+def test_edges_crossing_edges_read_their_depth_where_no_vertex_is_inside():
+    """Two square bars turned 45 degrees about their axes cross at right angles, ridge against ridge,
+    sunk 0.3 mm: no vertex of either lies inside the other, and the step's depth is the ridges' own,
+    0.3 / sqrt(2) mm (vertex-based: 0)."""
+    bar = trimesh.creation.box((10.0, 2.0, 2.0))
+    lower = trimesh.transformations.rotation_matrix(np.pi / 4, [1, 0, 0])
+    lower[2, 3] = -np.sqrt(2.0)
+    upper = (trimesh.transformations.rotation_matrix(np.pi / 2, [0, 0, 1]) @ trimesh.transformations.rotation_matrix(np.pi, [1, 0, 0])
+             @ trimesh.transformations.rotation_matrix(np.pi / 4, [1, 0, 0]))
+    upper[2, 3] = np.sqrt(2.0) - 0.3
+    model = CollisionModel([Body(1, bar, median_split_tree(bar), lower), Body(2, bar.copy(), median_split_tree(bar), upper)])
+    poses = {1: lower, 2: upper}
+    assert meshquery.penetration_depth(bar, lower, bar, upper) == 0.0
+    q = ExactQueries(model)
+    assert q.intersects((1, 2), poses)
+    assert q.penetration((1, 2), poses) == pytest.approx(0.3 / np.sqrt(2.0), abs=0.01)
+    found = contacts(model, poses, CollisionRequest(), ExactQueries(model), [(1, 2)], "discrete")
+    assert found.penetration[(1, 2)] == pytest.approx(0.3 / np.sqrt(2.0), abs=0.01)
+
+
+def test_meshes_without_an_inside_get_the_vertex_depth():
+    """An open mesh (a box without its top) has no reliable inside for the edge measure: the
+    vertex-based one answers, as it did before."""
+    open_box = trimesh.creation.box([2.0, 2.0, 2.0])
+    open_box = trimesh.Trimesh(open_box.vertices, open_box.faces[~np.isclose(open_box.triangles_center[:, 2], 1.0)], process=False)
+    a = trimesh.creation.box([4.0, 4.0, 4.0])
+    model = CollisionModel([Body(1, a, median_split_tree(a), np.eye(4)), Body(2, open_box, median_split_tree(open_box), np.eye(4))])
+    sunk = {1: np.eye(4), 2: translation([2.7, 0, 0])}
+    assert ExactQueries(model).penetration((1, 2), sunk) == meshquery.penetration_depth(a, sunk[1], open_box, sunk[2])
+
+
 @pytest.mark.slow  # builds the 28 teeth from nothing (tens of seconds)
 def test_building_parametric_teeth_imports_neither_the_detectors_nor_numba(tmp_path):
     code = ("import sys\n"

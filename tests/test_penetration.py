@@ -13,7 +13,7 @@ import pytest
 import trimesh
 
 from orthosim.geometry import meshquery
-from orthosim.geometry.penetration import DEPTH_TOLERANCE_MM, mesh_geometry, penetration_depth
+from orthosim.geometry.penetration import DEPTH_TOLERANCE_MM, edge_penetration_depth, mesh_geometry, penetration_depth
 
 I4 = np.eye(4)
 
@@ -65,6 +65,8 @@ def test_crossed_ridges_read_their_depth_over_root_two_where_no_vertex_is_inside
     depth = penetration_depth(bar, lower, bar, upper)
     truth = sunk / np.sqrt(2.0)  # each ridge point's distance to the other bar's faces at 45 degrees
     assert truth - DEPTH_TOLERANCE_MM <= depth <= truth + 1e-9
+    # the ridges are edges: the measure on vertices and edges a simulation step asks reads them too
+    assert truth - DEPTH_TOLERANCE_MM <= edge_penetration_depth(bar, lower, bar, upper) <= truth + 1e-9
 
 
 def test_meshes_apart_or_just_touching_read_zero():
@@ -102,6 +104,31 @@ def test_agrees_with_dense_sampling_and_is_never_below_the_vertex_depth(seed):
     # sampled points 20,000 to a surface of 113 mm^2 lie within about 0.1 mm of every point
     assert depth <= sampled + 0.1
     assert depth > 0.1  # the spheres overlap by about 0.4 mm less the facets' sag
+
+
+@pytest.mark.parametrize("seed", [4, 5, 6])
+def test_the_edge_measure_lies_between_the_vertex_measure_and_the_whole_one(seed):
+    rng = np.random.default_rng(seed)
+    tooth, bar = trimesh.creation.icosphere(2, 3.0), trimesh.creation.box((8.0, 1.5, 1.5))
+    pose = _rotation(rng.uniform(0, np.pi), rng.normal(size=3))
+    pose[:3, 3] = rng.normal(size=3) * 0.3 + [3.2, 0.0, 0.0]  # the bar's end sunk into the sphere
+    vertex = meshquery.penetration_depth(tooth, I4, bar, pose)
+    edges = edge_penetration_depth(tooth, I4, bar, pose)
+    whole = penetration_depth(tooth, I4, bar, pose)
+    assert whole > 0.05
+    assert vertex - 1e-9 <= edges <= whole + 1e-9
+    # the same, both meshes' roles swapped
+    assert edge_penetration_depth(bar, pose, tooth, I4) == pytest.approx(edges, abs=DEPTH_TOLERANCE_MM)
+
+
+def test_each_face_names_its_own_three_edges():
+    tooth = _tooth()
+    geo = mesh_geometry(tooth)
+    for f in (0, 7, len(tooth.faces) - 1):
+        own = {frozenset(e) for e in geo.edges[geo.face_edges[f]].tolist()}
+        a, b, c = tooth.faces[f].tolist()
+        assert own == {frozenset((a, b)), frozenset((b, c)), frozenset((c, a))}
+    assert len(geo.edges) == len(tooth.edges_unique)
 
 
 def test_the_inside_test_is_the_sign_of_the_closest_feature_normal():

@@ -2,7 +2,7 @@
 
 `meshquery`: exact queries on triangle meshes through python-fcl (BVH objects, poses, intersection,
 distance) and the vertex-based interpenetration depth. `penetration`: the interpenetration depth on
-every point of the triangles and by the largest ball inside both meshes (numba; imported on
-demand). `motion`: how a tooth moves between the two ends of a step (numpy only, for the drawing
+every point of the triangles and by the largest ball inside both meshes, and the cheaper one on
+vertices and edges a simulation step asks (numba; imported on demand). `motion`: how a tooth moves between the two ends of a step (numpy only, for the drawing
 side as well as the detectors).
 """
