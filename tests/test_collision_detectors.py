@@ -9,7 +9,7 @@ from collision_helpers import crown_like_mesh, median_split_tree, real_tooth_mes
 from orthosim.collision import DETECTORS, Body, CollisionError, CollisionModel, CollisionRequest, detect_step
 from orthosim.geometry import meshquery
 from orthosim.collision.circles import bounding_circles
-from orthosim.collision.motion import interpolate_pose
+from orthosim.geometry.motion import interpolate_pose
 from orthosim.collision.validate import ToothSet, continuous_study, dense_first_contact, discrete_study, thin_root_mesh
 from orthosim.pose import rotation_about_axis, translation
 

@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from orthosim.collision.motion import chord_deviation_bound, interpolate_pose, rotation_angle
+from orthosim.geometry.motion import chord_deviation_bound, interpolate_pose, rotation_angle
 from orthosim.pose import rotation_about_axis
 
 
@@ -57,7 +57,7 @@ def test_no_point_of_a_turning_tooth_strays_from_its_chord_beyond_the_bound(seed
 @settings(max_examples=100, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_no_two_points_of_two_moving_teeth_approach_faster_than_the_relative_speed_bound(seed):
-    from orthosim.collision.motion import relative_speed_bound
+    from orthosim.geometry.motion import relative_speed_bound
 
     rng = np.random.default_rng(seed)
     ends = []

@@ -190,7 +190,7 @@ def test_contacts_ask_no_interpenetration_of_pairs_whose_leaves_are_apart():
 def test_a_pose_path_at_time_zero_is_its_start_pose_without_finding_the_rotation():
     from scipy.spatial.transform import Rotation
 
-    from orthosim.collision.motion import PosePath, interpolate_pose
+    from orthosim.geometry.motion import PosePath, interpolate_pose
 
     T0, T1 = np.eye(4), np.eye(4)
     T0[:3, :3] = Rotation.from_rotvec([0.3, -0.2, 0.1]).as_matrix()

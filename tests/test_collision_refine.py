@@ -7,7 +7,7 @@ import trimesh
 from collision_helpers import median_split_tree
 from orthosim.collision.continuous import refine_time_of_contact
 from orthosim.collision.model import Body, CollisionModel
-from orthosim.collision.motion import relative_speed_bound
+from orthosim.geometry.motion import relative_speed_bound
 from orthosim.geometry import meshquery
 from orthosim.pose import translation
 

@@ -5,7 +5,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from orthosim.collision.motion import interpolate_pose
+from orthosim.geometry.motion import interpolate_pose
 from orthosim.pose import rotation_about_axis
 from render.timeline import frames_from_steps
 

@@ -14,7 +14,7 @@ import pytest
 
 from orthosim.case import CASES_DIR, load_case
 from orthosim.geometry import meshquery
-from orthosim.collision.motion import interpolate_pose
+from orthosim.geometry.motion import interpolate_pose
 from orthosim.errors import CaseError, OrthosimError
 from orthosim.parametric import parametric_dentition
 from orthosim.staging.commands import plan_case

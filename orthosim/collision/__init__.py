@@ -16,7 +16,7 @@ from .broadphase import arch_neighbour_pairs, candidate_pairs, facing_pairs, swe
 from .contract import DETECTORS, CollisionError, CollisionRequest, Contacts, PairResult, StepResult
 from .detect import contacts, default_pairs, detect_step
 from .model import Body, CollisionModel
-from .motion import interpolate_pose
+from ..geometry.motion import interpolate_pose
 from .queries import ExactQueries
 from .time_of_contact import first_time_of_contact
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from .descent import compiled_descent, descend, sphere_overlap_test
 from .model import FLOAT32_MARGIN_MM, CollisionModel
-from .motion import PosePath, chord_deviation_bound, max_speed, relative_speed_bound, rotation_angle
+from ..geometry.motion import PosePath, chord_deviation_bound, max_speed, relative_speed_bound, rotation_angle
 from .queries import ExactQueries
 from .time_of_contact import contact_interval, contact_interval_from_dots, min_distance_over_step
 

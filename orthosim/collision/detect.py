@@ -3,7 +3,7 @@
 The simulator and the renderer call `detect_step`; which detector runs is a parameter. Discrete
 detectors (circles, discrete, exact) test the poses at the end of the step (`poses_end`, or
 `poses_start` when there is no end); the continuous detector sweeps from `poses_start` to
-`poses_end` with the motion of `orthosim.collision.motion`.
+`poses_end` with the motion of `orthosim.geometry.motion`.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from .continuous import refine_time_of_contact, swept_leaves
 from .contract import DETECTORS, CollisionError, CollisionRequest, Contacts, StepResult, empty_leaves
 from .discrete import overlapping_leaves
 from .model import CollisionModel
-from .motion import chord_deviation_bound, interpolate_poses, rotation_angle
+from ..geometry.motion import chord_deviation_bound, interpolate_poses, rotation_angle
 from .queries import ExactQueries
 
 

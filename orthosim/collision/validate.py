@@ -7,7 +7,7 @@ touch (line search with exact FCL distances), then moves by a signed offset (mm;
 pushed in). Every pose is labelled by FCL (intersecting or not, distance) and tested by the
 discrete sphere-tree detector, all poses of a batch in one vectorised call.
 
-Continuous study: random motions over one step (the motion of `orthosim.collision.motion`) passing
+Continuous study: random motions over one step (the motion of `orthosim.geometry.motion`) passing
 near a contact pose: linear, rotational (up to half a turn) and "tunnelling" (a thin root crossing
 a tooth so fast that neither end pose touches). Ground truth: FCL collide at `samples` equally
 spaced times, the first hit refined by bisection (resolution 1/samples of the step before
@@ -32,7 +32,7 @@ from .continuous import refine_time_of_contact, swept_leaves_posed
 from .discrete import overlapping_leaves_posed
 from ..atomic import write_json
 from .model import Body, CollisionModel, default_tree_builder
-from .motion import interpolate_pose, max_speed
+from ..geometry.motion import interpolate_pose, max_speed
 from .queries import ExactQueries
 
 OFFSET_MM = 0.5  # near contact: signed offset from first contact within +/- this

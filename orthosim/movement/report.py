@@ -40,7 +40,7 @@ from typing import IO, Iterable, Iterator
 import numpy as np
 
 from ..atomic import atomic_path, to_jsonable, write_json, write_text
-from ..collision.motion import rotation_angle
+from ..geometry.motion import rotation_angle
 from ..interpenetration import start_depths
 from .biomechanics import movement_type
 from .simulation import MovementModel, StepRecord

@@ -14,7 +14,7 @@ memos) are apart; `step(model, state) -> (state, record)` makes one step (the pa
    push on, down the arch.
 2. `motions`: each tooth's motion under its free force (`biomechanics`, wire models and rate law);
    a blocked tooth whose neighbour gives way follows it (teeth in contact move together). Between
-   the step's ends a tooth moves as `collision.motion.interpolate_pose` says, the motion the
+   the step's ends a tooth moves as `geometry.motion.interpolate_pose` says, the motion the
    continuous detector sweeps.
 3. `detection`: pairs of teeth that may meet (arch neighbours skipping extracted teeth; facing
    teeth of the other arch) are tested with the run's detector. A pair already in contact at the

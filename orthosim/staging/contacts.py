@@ -1,7 +1,7 @@
 """Whether one stage's motion brings any two teeth into contact: the planner's collision check.
 
 A stage moves every tooth from its pose at the previous stage to its pose at this one with the
-motion the continuous detector assumes (`orthosim.collision.motion`). Every pair of teeth that may
+motion the continuous detector assumes (`orthosim.geometry.motion`). Every pair of teeth that may
 meet is tested, crowns and roots, same arch and opposing arch:
   1. broad phase: each tooth's root bounding sphere grown by its sweep (sweep and prune), so any
      two teeth can be paired, not only arch neighbours;
@@ -26,7 +26,7 @@ import numpy as np
 from ..collision.broadphase import sweep_and_prune
 from ..collision.continuous import swept_leaves_posed
 from ..collision.model import CollisionModel
-from ..collision.motion import PosePath, chord_deviation_bound, relative_speed_bound, rotation_angle
+from ..geometry.motion import PosePath, chord_deviation_bound, relative_speed_bound, rotation_angle
 from ..collision.queries import ExactQueries
 
 TOLERANCE_MM = 0.002  # resolution of the exact check (see the module docstring)

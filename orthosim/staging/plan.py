@@ -1,7 +1,7 @@
 """The staging planner: from start to target in aligner stages, within the limits, free of contact.
 
 Each tooth follows one path from its start pose to its target pose, the motion the continuous
-detector checks (`collision.motion`: origin on a straight line, rotation at constant angular
+detector checks (`geometry.motion`: origin on a straight line, rotation at constant angular
 velocity); the plan is how far along that path (progress 0..1) each tooth is at each stage. A
 stage's motion between two progress values is that same path's piece, so its movement components
 are the whole movement's times the progress made, and the limits cap each tooth's progress per
@@ -28,7 +28,7 @@ import numpy as np
 from .. import fdi as F
 from ..collision.broadphase import arch_neighbour_pairs
 from ..collision.model import CollisionModel
-from ..collision.motion import interpolate_pose
+from ..geometry.motion import interpolate_pose
 from ..dentition import Dentition
 from .contacts import StageChecker
 from .ipr import InterproximalReduction, StagingError, reduction_for

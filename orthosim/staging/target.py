@@ -74,7 +74,7 @@ def target_pose(tooth, start_pose: np.ndarray, movement: ToothMovement) -> np.nd
     axes = local_axes(tooth)
     offset = c[:3] @ axes[:3]  # local mm
     w = np.radians(c[3:]) @ axes[3:]  # local rotation vector, radians
-    from ..collision.motion import rotation_matrix
+    from ..geometry.motion import rotation_matrix
 
     M = np.eye(4)
     M[:3, :3] = rotation_matrix(w)
@@ -85,8 +85,8 @@ def target_pose(tooth, start_pose: np.ndarray, movement: ToothMovement) -> np.nd
 def movement_components(tooth, start_pose: np.ndarray, pose_a: np.ndarray, pose_b: np.ndarray) -> np.ndarray:
     """(6,) the motion from pose_a to pose_b in the tooth's start frame: mm, mm, mm, deg, deg, deg
     (COMPONENTS order). Translation is of the local origin; angles are the components of the
-    rotation vector of the motion (the motion law's rotation: `collision.motion`)."""
-    from ..collision.motion import rotation_vector
+    rotation vector of the motion (the motion law's rotation: `geometry.motion`)."""
+    from ..geometry.motion import rotation_vector
 
     R0 = np.asarray(start_pose, float)[:3, :3]
     axes = local_axes(tooth)
