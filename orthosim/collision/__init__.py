@@ -6,17 +6,18 @@
 Modules: `contract` (request and result types), `model` (what never changes), `broadphase`
 (which pairs to test), `circles` (detector 1), `discrete` (detector 2), `continuous` (detector 3),
 `descent` (the shared vectorised tree descent), `time_of_contact` (Eq. 2 and step bounds),
-`motion` (pose interpolation in a step), `queries` (a run's exact answers on the meshes, through
-`orthosim.geometry.meshquery`), `detect` (the entry points: `detect_step`, `contacts`), `bench`
-(timings), `validate` (accuracy studies), `memory` (a process-wide allocator setting worth making
-at the CLI entry), `commands` (`orthosim collide ...`).
+`queries` (a run's exact answers on the meshes, through `orthosim.geometry.meshquery`), `detect`
+(the entry points: `detect_step`, `contacts`), `bench` (timings), `validate` (accuracy studies),
+`memory` (a process-wide allocator setting worth making at the CLI entry), `commands` (`orthosim
+collide ...`). How a tooth moves within a step (the
+motion every detector assumes) is `orthosim.geometry.motion`.
 """
 
+from ..geometry.motion import interpolate_pose
 from .broadphase import arch_neighbour_pairs, candidate_pairs, facing_pairs, sweep_and_prune
 from .contract import DETECTORS, CollisionError, CollisionRequest, Contacts, PairResult, StepResult
 from .detect import contacts, default_pairs, detect_step
 from .model import Body, CollisionModel
-from ..geometry.motion import interpolate_pose
 from .queries import ExactQueries
 from .time_of_contact import first_time_of_contact
 
