@@ -54,15 +54,12 @@ class MeshGeometry:
         if len(F) == 0:
             raise ValueError("a mesh with no faces has no inside")
         self.V, self.F = V, F
-        self.face_n, self.edge_n, self.vert_n = _pseudonormals(V, F)
+        self.edges, self.face_edges = _edges(V, F)
+        self.face_n, self.edge_n, self.vert_n = _pseudonormals(V, F, self.face_edges, len(self.edges))
         tri = V[F]
         self.FC = np.ascontiguousarray(tri.mean(axis=1))
         self.FR = np.linalg.norm(tri - self.FC[:, None, :], axis=2).max(axis=1) * (1 + 1e-12) + 1e-12
         self.lo, self.hi = V.min(axis=0), V.max(axis=0)
-        corners = np.sort(np.stack([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
-        keys, face_edges = np.unique(corners[:, 0] * len(V) + corners[:, 1], return_inverse=True)
-        self.edges = np.stack([keys // len(V), keys % len(V)], axis=1)  # (e, 2) vertex pairs
-        self.face_edges = face_edges.reshape(-1, 3)  # each face's three edges
         self._build_hierarchy()
 
     def _build_hierarchy(self) -> None:
@@ -94,25 +91,32 @@ def mesh_geometry(mesh: trimesh.Trimesh) -> MeshGeometry:
     return entry[1]
 
 
-def _pseudonormals(V: np.ndarray, F: np.ndarray):
+def _edges(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh's edges, (e, 2) vertex pairs (lower index first), and each face's three, (f, 3):
+    ab, bc, ca."""
+    corners = np.sort(np.stack([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
+    keys, face_edges = np.unique(corners[:, 0] * len(V) + corners[:, 1], return_inverse=True)
+    return np.stack([keys // len(V), keys % len(V)], axis=1), face_edges.reshape(-1, 3)
+
+
+def _pseudonormals(V: np.ndarray, F: np.ndarray, face_edges: np.ndarray, n_edges: int):
     """Unit face normals (f, 3), edge pseudonormals per face edge (f, 3, 3: edges ab, bc, ca; the
     sum of the normals of the faces sharing it) and angle-weighted vertex normals (v, 3)."""
     tri = V[F]
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-    edges = np.stack([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], axis=1).reshape(-1, 2)
-    key = np.sort(edges, axis=1)
-    _, inverse = np.unique(key[:, 0] * len(V) + key[:, 1], return_inverse=True)
-    inverse = inverse.reshape(-1)
-    summed = np.zeros((inverse.max() + 1, 3))
-    np.add.at(summed, inverse, np.repeat(n, 3, axis=0))
-    edge_n = np.ascontiguousarray(summed[inverse].reshape(-1, 3, 3))
-    vert_n = np.zeros((len(V), 3))
+    flat = face_edges.reshape(-1)
+    per_corner = np.repeat(n, 3, axis=0)
+    summed = np.stack([np.bincount(flat, per_corner[:, a], n_edges) for a in range(3)], axis=1)
+    edge_n = np.ascontiguousarray(summed[flat].reshape(-1, 3, 3))
+    angle_n = []
     for k in range(3):
         u = tri[:, (k + 1) % 3] - tri[:, k]
         w = tri[:, (k + 2) % 3] - tri[:, k]
         cos = np.einsum("ij,ij->i", u, w) / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1), 1e-300)
-        np.add.at(vert_n, F[:, k], n * np.arccos(np.clip(cos, -1.0, 1.0))[:, None])
+        angle_n.append(n * np.arccos(np.clip(cos, -1.0, 1.0))[:, None])
+    corner_n, corner_v = np.concatenate(angle_n), F.T.reshape(-1)  # corner k of every face, k = 0, 1, 2
+    vert_n = np.stack([np.bincount(corner_v, corner_n[:, a], len(V)) for a in range(3)], axis=1)
     vert_n /= np.maximum(np.linalg.norm(vert_n, axis=1, keepdims=True), 1e-300)
     return np.ascontiguousarray(n), edge_n, np.ascontiguousarray(vert_n)
 
