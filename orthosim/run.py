@@ -218,9 +218,15 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, 
     yield PhaseDone("trees", t2 - t1, f"{len(collision.bodies)} sphere trees")
     out_dir = Path(out_dir)
     report = RunReport(model, detector, steps_file=out_dir / STEPS_FILE, distances_file=out_dir / DISTANCES_PER_STEP_FILE)
+    depth_kernels = False
     for record in report.collect(simulate(model, detector, queries=queries)):
         yield record
         if record.step == 1:  # and what the first steps compiled: numba's compiler lies idle from now on
+            release_compiler_pages()
+        elif not depth_kernels and "orthosim.geometry.penetration" in sys.modules:
+            # the depth kernels load on a run's first intersecting pair, whenever that comes, and
+            # loading them touches the compiler's pages again
+            depth_kernels = True
             release_compiler_pages()
     report.finish_streams(out_dir)
     metrics = report.metrics()
