@@ -1,6 +1,7 @@
 """How deep two posed closed meshes interpenetrate, on every point of their triangles, not only vertices.
 
     depth = penetration_depth(mesh_a, pose_a, mesh_b, pose_b)        # mm, 0.0 when neither enters the other
+    depth = edge_penetration_depth(mesh_a, pose_a, mesh_b, pose_b)   # vertices and edges only: a step's measure
 
 The answer is the larger of two depths, each taken both ways (a in b, b in a):
 - surface depth: the deepest point of one surface inside the other solid, as its distance to the
@@ -15,12 +16,18 @@ The answer is the larger of two depths, each taken both ways (a in b, b in a):
   either surface (each vertex along its angle-weighted normal, each face's centroid and edge
   midpoints along the face normal) that lies inside the other solid. It sees teeth whose surfaces
   coincide or nearly do (the same tooth twice at one place: about half its thickness), which every
-  surface measure reads as 0. The radius reported is the distance from the ball's centre to the nearer of the two surfaces,
-  so the ball is truly inside both.
+  surface measure reads as 0. The radius reported is the distance from the ball's centre to the
+  nearer of the two surfaces, so the ball is truly inside both.
+
+`edge_penetration_depth` is the surface depth on the vertices and edges alone (branch and bound on
+segments), a few milliseconds a touching pair of teeth: what a simulation step asks of every pair
+that intersects. Both start by dropping, per way, the nodes of one mesh's hierarchy that cannot
+reach inside the other (one depth query at a node's centre bounds the whole node).
 
 Inside or outside: the sign of the closest feature's angle-weighted pseudonormal (Baerentzen and
 Aanaes 2005), exact for closed, consistently oriented meshes. Closest points are found on a
-bounding-sphere hierarchy of each mesh's faces, built once per mesh and kept beside it (weakly).
+hierarchy of each mesh's faces (a sphere and a box per node), built once per mesh and kept beside
+it (weakly).
 Hand-written in numba: FCL answers no inside test and one closest pair per call, and trimesh's
 signed distance costs about a millisecond a point; this costs microseconds a point.
 Imported on demand only (numba's start-up is not for the drawing side): `orthosim.geometry` does
@@ -193,16 +200,19 @@ def _hierarchy(FC, FR, corner_lo, corner_hi, leaf_faces):
         idx = order[s:e]
         c = np.zeros(3)
         for f in idx:
-            c += FC[f]
+            for axis in range(3):
+                c[axis] += FC[f, axis]
         c /= e - s
         r = 0.0
         for f in idx:
-            r = max(r, np.sqrt(((FC[f] - c) ** 2).sum()) + FR[f])
+            r = max(r, np.sqrt((FC[f, 0] - c[0]) ** 2 + (FC[f, 1] - c[1]) ** 2 + (FC[f, 2] - c[2]) ** 2) + FR[f])
         centers[k], radii[k] = c, r * (1 + 1e-12) + 1e-12
-        lo[k], hi[k] = corner_lo[idx[0]], corner_hi[idx[0]]
-        for f in idx:
-            lo[k] = np.minimum(lo[k], corner_lo[f])
-            hi[k] = np.maximum(hi[k], corner_hi[f])
+        for axis in range(3):
+            low, high = np.inf, -np.inf
+            for f in idx:
+                low = min(low, corner_lo[f, axis])
+                high = max(high, corner_hi[f, axis])
+            lo[k, axis], hi[k, axis] = low, high
         start[k], count[k] = s, e - s
         if parent >= 0:
             if side == 0:
