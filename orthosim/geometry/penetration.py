@@ -322,6 +322,19 @@ def _depths(points, V, F, face_n, edge_n, vert_n, node_c, node_r, node_lo, node_
     return out
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _farthest_from_face(corners, V, F, f, q):
+    """The largest distance from the corners (k, 3) of a triangle or segment to face f. A point inside
+    is no deeper than its distance to any face, and that distance, convex, is largest at a corner:
+    no point of the triangle or segment lies deeper than this."""
+    fa, fb, fc = V[F[f, 0]], V[F[f, 1]], V[F[f, 2]]
+    far = 0.0
+    for i in range(corners.shape[0]):
+        _closest_on_triangle(corners[i], fa, fb, fc, q)
+        far = max(far, np.sqrt(((corners[i] - q) ** 2).sum()))
+    return far
+
+
 @njit(cache=True, nogil=True)
 def _surface_depth(tris, best, tol, V, F, face_n, edge_n, vert_n, node_c, node_r, node_lo, node_hi, left, right, start, count, order):
     """The largest depth inside the mesh of any point of the triangles `tris` (t, 3, 3), at least
@@ -345,15 +358,9 @@ def _surface_depth(tris, best, tol, V, F, face_n, edge_n, vert_n, node_c, node_r
                 best = d
             if d + r <= best + tol:
                 continue
-            # a point inside is no deeper than its distance to any face, here f, and that distance,
-            # convex, is largest at a corner: the bound that ends the search where the surfaces
-            # run parallel (d about 0 all over the triangle, which d + r cannot tell)
-            fa, fb, fc = V[F[f, 0]], V[F[f, 1]], V[F[f, 2]]
-            corner = 0.0
-            for v in (a, b, c):
-                _closest_on_triangle(v, fa, fb, fc, q)
-                corner = max(corner, np.sqrt(((v - q) ** 2).sum()))
-            if corner <= best + tol:
+            # the bound that ends the search where the surfaces run parallel (d about 0 all over the
+            # triangle, which d + r cannot tell)
+            if _farthest_from_face(stack[top], V, F, f, q) <= best + tol:
                 continue
             if top + 4 > cap:
                 grown = np.empty((2 * cap, 3, 3))
@@ -408,12 +415,7 @@ def _edge_depth(segments, ends, best, tol, V, F, face_n, edge_n, vert_n, node_c,
                                count, order)
             if d > best:
                 best = d
-            fa, fb, fc = V[F[f, 0]], V[F[f, 1]], V[F[f, 2]]
-            _closest_on_triangle(a, fa, fb, fc, q)
-            corner = np.sqrt(((a - q) ** 2).sum())
-            _closest_on_triangle(b, fa, fb, fc, q)
-            corner = max(corner, np.sqrt(((b - q) ** 2).sum()))
-            if corner <= best + tol:
+            if _farthest_from_face(stack[top], V, F, f, q) <= best + tol:
                 continue
             if top + 2 > cap:
                 grown = np.empty((2 * cap, 2, 3))
@@ -429,6 +431,18 @@ def _edge_depth(segments, ends, best, tol, V, F, face_n, edge_n, vert_n, node_c,
             depth[top + 1, 0], depth[top + 1, 1] = d, db
             top += 2
     return best
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _pushed(stack, top, a, b):
+    """`stack` (node indices, `top` of them in use) with a and b pushed, grown twice over when full."""
+    if top + 2 > stack.shape[0]:
+        grown = np.empty(2 * stack.shape[0], np.int64)
+        grown[:top] = stack[:top]
+        stack = grown
+    stack[top] = a
+    stack[top + 1] = b
+    return stack
 
 
 @njit(cache=True, nogil=True)
@@ -453,12 +467,7 @@ def _reaching_faces(node_c, node_r, left, right, start, count, order, n_faces, f
             for i in range(start[k], start[k] + count[k]):
                 keep[order[i]] = True
             continue
-        if top + 2 > stack.shape[0]:
-            grown = np.empty(2 * stack.shape[0], np.int64)
-            grown[:top] = stack[:top]
-            stack = grown
-        stack[top] = left[k]
-        stack[top + 1] = right[k]
+        stack = _pushed(stack, top, left[k], right[k])
         top += 2
     return keep
 
@@ -484,12 +493,7 @@ def _surface_within(p, rho, V, F, face_n, edge_n, vert_n, node_c, node_r, node_l
                 if ((p - q) ** 2).sum() < rho2:
                     return True
             continue
-        if top + 2 > stack.shape[0]:
-            grown = np.empty(2 * stack.shape[0], np.int64)
-            grown[:top] = stack[:top]
-            stack = grown
-        stack[top] = left[k]
-        stack[top + 1] = right[k]
+        stack = _pushed(stack, top, left[k], right[k])
         top += 2
     return False
 
