@@ -131,6 +131,14 @@ def test_each_face_names_its_own_three_edges():
     assert len(geo.edges) == len(tooth.edges_unique)
 
 
+def test_a_mesh_has_an_inside_only_when_closed_and_consistently_wound():
+    box = trimesh.creation.box((2.0, 4.0, 6.0))
+    holed = trimesh.Trimesh(box.vertices, box.faces[1:], process=False)
+    flipped = trimesh.Trimesh(box.vertices, np.vstack([box.faces[:1, ::-1], box.faces[1:]]), process=False)
+    assert mesh_geometry(box).closed and mesh_geometry(_tooth()).closed
+    assert not mesh_geometry(holed).closed and not mesh_geometry(flipped).closed
+
+
 def test_the_inside_test_is_the_sign_of_the_closest_feature_normal():
     box = trimesh.creation.box((2.0, 4.0, 6.0))
     depths = mesh_geometry(box).signed_depth([[0, 0, 0], [0.9, 0, 0], [1.0, 1.0, 1.0], [1.5, 0, 0], [2.0, 3.0, 4.0]])

@@ -100,7 +100,6 @@ class ExactQueries:
         self._faces: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._trees: dict[int, object] = {}
         self._world: OrderedDict[bytes, np.ndarray] = OrderedDict()
-        self._closed: dict[int, bool] = {}
 
     # ------------------------------------------------------------------ by FDI pair and poses
     def intersects(self, pair: tuple[int, int], poses: Mapping[int, np.ndarray]) -> bool:
@@ -281,20 +280,12 @@ class ExactQueries:
         return self._remember(self._depths, key, (hit, depth))
 
     def _depth(self, i: int, pose_i: np.ndarray, j: int, pose_j: np.ndarray) -> float:
-        mesh_i, mesh_j = self.model.bodies[i].mesh, self.model.bodies[j].mesh
-        if self._is_closed(i) and self._is_closed(j):
-            from ..geometry.penetration import edge_penetration_depth  # numba-compiled: loaded on first use
+        from ..geometry.penetration import edge_penetration_depth, mesh_geometry  # numba: loaded on first use
 
+        mesh_i, mesh_j = self.model.bodies[i].mesh, self.model.bodies[j].mesh
+        if mesh_geometry(mesh_i).closed and mesh_geometry(mesh_j).closed:  # both have an inside
             return edge_penetration_depth(mesh_i, pose_i, mesh_j, pose_j)
         return meshquery.penetration_depth(mesh_i, pose_i, mesh_j, pose_j)
-
-    def _is_closed(self, i: int) -> bool:
-        """Whether body i's mesh is closed and consistently oriented (it has an inside)."""
-        known = self._closed.get(i)
-        if known is None:
-            mesh = self.model.bodies[i].mesh
-            known = self._closed[i] = bool(mesh.is_watertight and mesh.is_winding_consistent)
-        return known
 
     # ------------------------------------------------------------------
     def _pair(self, pair) -> tuple[int, int]:

@@ -62,6 +62,7 @@ class MeshGeometry:
             raise ValueError("a mesh with no faces has no inside")
         self.V, self.F = V, F
         self.edges, self.face_edges = _edges(V, F)
+        self.closed = _closed(F, self.face_edges, len(self.edges))
         self.face_n, self.edge_n, self.vert_n = _pseudonormals(V, F, self.face_edges, len(self.edges))
         tri = V[F]
         self.FC = np.ascontiguousarray(tri.mean(axis=1))
@@ -104,6 +105,17 @@ def _edges(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     corners = np.sort(np.stack([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
     keys, face_edges = np.unique(corners[:, 0] * len(V) + corners[:, 1], return_inverse=True)
     return np.stack([keys // len(V), keys % len(V)], axis=1), face_edges.reshape(-1, 3)
+
+
+def _closed(F: np.ndarray, face_edges: np.ndarray, n_edges: int) -> bool:
+    """Whether the mesh is closed and consistently oriented, so that the pseudonormals tell inside
+    from outside: every edge in exactly two faces, which run along it in opposite directions (no
+    directed edge twice); trimesh's `is_watertight and is_winding_consistent`, from these arrays."""
+    if not np.all(np.bincount(face_edges.reshape(-1), minlength=n_edges) == 2):
+        return False
+    directed = np.stack([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], axis=1).reshape(-1, 2)
+    keys = directed[:, 0] * (int(F.max()) + 1) + directed[:, 1]
+    return len(np.unique(keys)) == len(keys)
 
 
 def _pseudonormals(V: np.ndarray, F: np.ndarray, face_edges: np.ndarray, n_edges: int):
