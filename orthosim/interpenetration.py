@@ -63,10 +63,9 @@ def pair_depth(mesh_a, pose_a, mesh_b, pose_b) -> float:
     """mm two posed tooth meshes interpenetrate: `geometry.penetration.penetration_depth` for closed,
     consistently oriented meshes, else the vertex-based `geometry.meshquery.penetration_depth`."""
     from .geometry import meshquery
+    from .geometry.penetration import mesh_geometry, penetration_depth
 
-    if all(m.is_watertight and m.is_winding_consistent for m in (mesh_a, mesh_b)):
-        from .geometry.penetration import penetration_depth
-
+    if mesh_geometry(mesh_a).closed and mesh_geometry(mesh_b).closed:  # both have an inside
         return penetration_depth(mesh_a, pose_a, mesh_b, pose_b)
     return meshquery.penetration_depth(mesh_a, pose_a, mesh_b, pose_b)
 

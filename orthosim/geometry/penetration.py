@@ -568,13 +568,12 @@ def _moved(geo: MeshGeometry, M: np.ndarray) -> MeshGeometry:
     return out
 
 
-def _tangent_points(geo: MeshGeometry, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Points of the given faces a ball is grown from, with their outward normals: each corner (its
-    vertex's pseudonormal), the centroid and the edges' midpoints (the face normal), so that a face's
-    middle is tried whatever the triangulation (a quad's diagonal midpoint is its centre)."""
-    F = geo.F[faces]
-    verts = np.unique(F)
-    tri = geo.V[F]
+def _tangent_points(geo: MeshGeometry, faces: np.ndarray, verts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points of the given faces (their corners: `verts`) a ball is grown from, with their outward
+    normals: each corner (its vertex's pseudonormal), the centroid and the edges' midpoints (the face
+    normal), so that a face's middle is tried whatever the triangulation (a quad's diagonal midpoint
+    is its centre)."""
+    tri = geo.V[geo.F[faces]]
     mids = 0.5 * (tri + np.roll(tri, -1, axis=1))
     pts = np.concatenate([geo.V[verts], geo.FC[faces], mids.reshape(-1, 3)])
     nrm = np.concatenate([geo.vert_n[verts], geo.face_n[faces], np.repeat(geo.face_n[faces], 3, axis=0)])
@@ -589,10 +588,10 @@ def penetration_depth(mesh_a: trimesh.Trimesh, pose_a: np.ndarray, mesh_b: trime
     tol = float(tolerance_mm)
     ways = _facing(mesh_a, pose_a, mesh_b, pose_b, tol)
     best = _vertex_depth(ways)
-    for own, other, M, moved, faces, *_ in ways:  # balls: the coincident and nearly coincident surfaces
+    for own, other, M, moved, faces, verts, _ in ways:  # balls: the coincident and nearly coincident surfaces
         if len(faces):
             other_here = _moved(other, np.linalg.inv(M))  # other's arrays in own's frame
-            pts, nrm = _tangent_points(own, faces)
+            pts, nrm = _tangent_points(own, faces, verts)
             best = _ball_depth(pts, nrm, float(own.node_r[0]), best, tol, own.args(), other_here.args())
     for own, other, _, moved, faces, *_ in ways:  # every point of the triangles that can reach inside
         if len(faces):
