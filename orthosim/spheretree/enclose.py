@@ -17,29 +17,74 @@ def node_vertex_groups(faces: np.ndarray, node_of_face: np.ndarray, n_nodes: int
     """Padded vertex indices of each node: (n_nodes, m) int64, rows padded by repeating an entry.
 
     `faces` (F, 3) int, `node_of_face` (F,) int in [0, n_nodes): the distinct vertices of the faces
-    of each node. A node without faces gets a row of -1.
+    of each node, in increasing order. A node without faces gets a row of -1.
     """
     n_vertices = int(faces.max()) + 1 if len(faces) else 1
-    key = np.unique(np.repeat(node_of_face.astype(np.int64), 3) * n_vertices + faces.ravel())
-    node, vert = key // n_vertices, key % n_vertices
-    counts = np.bincount(node, minlength=n_nodes)
-    m = max(int(counts.max()) if len(counts) else 1, 1)
-    start = np.cumsum(counts) - counts
-    pos = np.arange(len(key)) - np.repeat(start, counts)
-    out = np.full((n_nodes, m), -1, dtype=np.int64)
+    return _node_vertices(np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(node_of_face, dtype=np.int64),
+                          int(n_nodes), n_vertices)
+
+
+@njit(cache=True, nogil=True)
+def _node_vertices(faces, node_of_face, n_nodes, n_vertices):
+    """`node_vertex_groups` compiled: faces bucketed by node, each node's vertices gathered once
+    (a vertex is stamped with the last node that took it), then sorted (the builder asks this a
+    thousand times a tooth; numpy's unique of node x vertex keys cost ten times as much)."""
+    n_faces = len(faces)
+    first_face = np.zeros(n_nodes + 1, np.int64)
+    for f in range(n_faces):
+        first_face[node_of_face[f] + 1] += 1
+    for i in range(n_nodes):
+        first_face[i + 1] += first_face[i]
+    fill = first_face[:-1].copy()
+    by_node = np.empty(n_faces, np.int64)
+    for f in range(n_faces):
+        by_node[fill[node_of_face[f]]] = f
+        fill[node_of_face[f]] += 1
+    stamp = np.full(n_vertices, -1, np.int64)
+    start = np.zeros(n_nodes + 1, np.int64)
+    verts = np.empty(3 * n_faces, np.int64)
+    count = 0
+    widest = 1
+    for node in range(n_nodes):
+        start[node] = count
+        for t in range(first_face[node], first_face[node + 1]):
+            for a in range(3):
+                v = faces[by_node[t], a]
+                if stamp[v] != node:
+                    stamp[v] = node
+                    verts[count] = v
+                    count += 1
+        verts[start[node]:count].sort()
+        widest = max(widest, count - start[node])
+    start[n_nodes] = count
     # Pad each row with its first vertex: a repeated point changes no enclosing sphere.
-    first = np.where(counts > 0, vert[np.minimum(start, len(vert) - 1)], -1)
-    out[:] = first[:, None]
-    out[node, pos] = vert
+    out = np.full((n_nodes, widest), -1, np.int64)
+    for node in range(n_nodes):
+        m = start[node + 1] - start[node]
+        if m:
+            out[node, :m] = verts[start[node]:start[node + 1]]
+            out[node, m:] = verts[start[node]]
     return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _unpadded(points, g):
+    """Length of group g of padded (G, M, >=3) points without its trailing copies of its first point
+    (the padding of `node_vertex_groups`): a copy of a point changes no farthest distance."""
+    m_n = points.shape[1]
+    while m_n > 1 and points[g, m_n - 1, 0] == points[g, 0, 0] and points[g, m_n - 1, 1] == points[g, 0, 1] \
+            and points[g, m_n - 1, 2] == points[g, 0, 2]:
+        m_n -= 1
+    return m_n
 
 
 @njit(cache=True, nogil=True)
 def _badoiu_clarkson(points, iterations):
     """Per group of (G, M, 3): the best centre met in `iterations` steps toward the farthest point."""
-    g_n, m_n = points.shape[0], points.shape[1]
+    g_n = points.shape[0]
     best_c = np.empty((g_n, 3))
     for g in range(g_n):
+        m_n = _unpadded(points, g)
         c = np.empty(3)
         for a in range(3):
             lo, hi = points[g, 0, a], points[g, 0, a]
@@ -79,10 +124,10 @@ def enclosing_spheres(points: np.ndarray, iterations: int = 200) -> tuple[np.nda
 @njit(cache=True, nogil=True)
 def _farthest(points, centers):
     """(G, M, 3) and (G, C, 3) -> (G, C): distance from each centre to the farthest point of its group."""
-    g_n, m_n = points.shape[0], points.shape[1]
-    c_n = centers.shape[1]
+    g_n, c_n = points.shape[0], centers.shape[1]
     out = np.empty((g_n, c_n))
     for g in range(g_n):
+        m_n = _unpadded(points, g)
         for c in range(c_n):
             x, y, z = centers[g, c, 0], centers[g, c, 1], centers[g, c, 2]
             best = 0.0

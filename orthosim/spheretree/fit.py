@@ -94,16 +94,19 @@ def medial_radii(
     """
     tree = cKDTree(surface)
     r = np.full(len(points), float(r_max))
+    act = np.arange(len(points))  # a ball that did not shrink meets the same point next time: done
     for _ in range(iterations):
-        c = points - r[:, None] * normals
-        d, j = tree.query(c)
-        v = points - surface[j]
-        denom = 2.0 * np.einsum("ij,ij->i", v, normals)
-        shrink = (d < r * (1 - 1e-9)) & (denom > 1e-12)
-        if not shrink.any():
+        p, n, ra = points[act], normals[act], r[act]
+        d, j = tree.query(p - ra[:, None] * n)
+        v = p - surface[j]
+        denom = 2.0 * np.einsum("ij,ij->i", v, n)
+        shrink = (d < ra * (1 - 1e-9)) & (denom > 1e-12)
+        r_new = np.where(shrink, np.minimum(ra, np.einsum("ij,ij->i", v, v) / np.where(denom > 1e-12, denom, 1.0)), ra)
+        moved = r_new != ra
+        r[act] = r_new
+        act = act[moved]
+        if not len(act):
             break
-        r_new = np.einsum("ij,ij->i", v, v) / np.where(denom > 1e-12, denom, 1.0)
-        r = np.where(shrink, np.minimum(r, r_new), r)
     return r
 
 
@@ -157,6 +160,24 @@ def _kmeans(points: np.ndarray, k: int, iterations: int, rng, weights: np.ndarra
     return np.unique(label, return_inverse=True)[1]
 
 
+@njit(cache=True, nogil=True)
+def _fill_nearest_first(order, k, capacity, label):
+    """Label (n,) points by (point, centre) pairs in `order` (flat indices point * k + centre, nearest
+    first): each point joins the first centre it meets that has room left (`capacity` each)."""
+    n = len(label)
+    label[:] = -1
+    room = np.full(k, capacity)
+    left = n
+    for flat in order:
+        i, j = flat // k, flat % k
+        if label[i] < 0 and room[j] > 0:
+            label[i] = j
+            room[j] -= 1
+            left -= 1
+            if not left:
+                break
+
+
 def _split_with_capacity(points: np.ndarray, k: int, capacity: int, rng, iterations: int = 6) -> np.ndarray:
     """(n, 3) points into at most k groups of at most `capacity` each (n <= k * capacity): (n,) labels.
 
@@ -169,18 +190,7 @@ def _split_with_capacity(points: np.ndarray, k: int, capacity: int, rng, iterati
     label = np.zeros(n, dtype=np.int64)
     for _ in range(iterations):
         d = ((points[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2)
-        order = np.argsort(d, axis=None, kind="stable")
-        label[:] = -1
-        room = np.full(k, capacity)
-        left = n
-        for flat in order:
-            i, j = divmod(int(flat), k)
-            if label[i] < 0 and room[j] > 0:
-                label[i] = j
-                room[j] -= 1
-                left -= 1
-                if not left:
-                    break
+        _fill_nearest_first(np.argsort(d, axis=None, kind="stable"), k, capacity, label)
         means, total = _group_means(points, label, k)
         centres[total > 0] = means[total > 0]
     return label
@@ -190,11 +200,16 @@ def _split_with_capacity(points: np.ndarray, k: int, capacity: int, rng, iterati
 def _radius_and_gap(points, centers):
     """(G, M, 4) weighted points (x, y, z mm, weight mm^2) and (G, C, 3) centres -> (G, C) radii to
     the farthest point, and (G, C) sums of weight x (radius - distance), mm^3."""
-    g_n, m_n, c_n = points.shape[0], points.shape[1], centers.shape[1]
+    g_n, c_n = points.shape[0], centers.shape[1]
     radius = np.empty((g_n, c_n))
     gap = np.empty((g_n, c_n))
-    d = np.empty(m_n)
+    d = np.empty(points.shape[1])
     for g in range(g_n):
+        # Padding (`_LeafFitter.patches`) repeats the first point with weight 0: it adds nothing.
+        m_n = points.shape[1]
+        while m_n > 1 and points[g, m_n - 1, 3] == 0.0 and points[g, m_n - 1, 0] == points[g, 0, 0] \
+                and points[g, m_n - 1, 1] == points[g, 0, 1] and points[g, m_n - 1, 2] == points[g, 0, 2]:
+            m_n -= 1
         for c in range(c_n):
             far = 0.0
             for m in range(m_n):
@@ -284,17 +299,19 @@ class _LeafFitter:
         r_grown = np.maximum(r[near], need)
         base = self.count(c, r)
         gain_a = self.count(c, r_shrunk) - base  # <= 0
-        delta = np.full(near.shape, np.inf)
         mv = np.flatnonzero(movable)  # only these have anything to hand over
-        grown = self.count(c[near[mv]].reshape(-1, 3), r_grown[mv].ravel()).reshape(len(mv), -1) - base[near[mv]]
-        delta[mv] = grown + gain_a[mv, None] + 1e-6 * (r_grown[mv] - r[near[mv]])
-        delta[near == np.arange(n)[:, None]] = np.inf
-        best = delta.argmin(axis=1)
-        best_delta = delta[np.arange(n), best]
-        target = near[np.arange(n), best]
+        # Per A, the first B minimising [B grown - B] + [A shrunk - A] + 1e-6 x B's growth, among
+        # changes below 0: counting a grown B stops once it cannot win (`OutsideBand.best`).
+        nb = near[mv]
+        rest = np.where(nb == mv[:, None], np.inf, gain_a[mv, None] - base[nb])  # A itself is no B
+        j, found, _ = self.band.best(c[nb], r_grown[mv], rest, 1e-6 * (r_grown[mv] - r[nb]), np.zeros(len(mv)))
+        best_delta = np.full(n, np.inf)
+        best_delta[mv] = np.where(j >= 0, found, np.inf)
+        target = np.zeros(n, np.int64)
+        target[mv] = nb[np.arange(len(mv)), np.maximum(j, 0)]
         busy = np.zeros(n, dtype=bool)
         moves = {}
-        for a in np.argsort(best_delta):
+        for a in np.argsort(best_delta, kind="stable"):
             if not best_delta[a] < 0:
                 break
             b = target[a]

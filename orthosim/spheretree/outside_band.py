@@ -23,46 +23,55 @@ from .inside import CrossingIndex
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _slice_weight(prefix, origin, h, cy, cz, rx, i):
-    """Weight of band voxels in x slice i inside a sphere centred at (., cy, cz) whose squared radius
-    in that slice is rx >= 0: one running-sum subtraction per (x, y) column it crosses."""
-    ny, nz = prefix.shape[1], prefix.shape[2] - 1
+def _slice_weight(prefix, cy, cz, rx):
+    """Weight of band voxels in one x slice (`prefix` (ny, nz + 1) running sums along z) inside a
+    sphere centred at (., cy, cz) whose squared radius in that slice is rx >= 0, all in voxel units
+    from the grid's first centre: one running-sum subtraction per (x, y) column it crosses."""
+    ny, nz = prefix.shape[0], prefix.shape[1] - 1
     ry = np.sqrt(rx)
-    j0 = max(int(np.ceil((cy - ry - origin[1]) / h)), 0)
-    j1 = min(int(np.floor((cy + ry - origin[1]) / h)), ny - 1)
+    j0 = max(int(np.ceil(cy - ry)), 0)
+    j1 = min(int(np.floor(cy + ry)), ny - 1)
     total = 0
     for j in range(j0, j1 + 1):
-        dy = origin[1] + h * j - cy
+        dy = j - cy
         rz = rx - dy * dy
         if rz < 0.0:
             continue
         half = np.sqrt(rz)
-        k0 = max(int(np.ceil((cz - half - origin[2]) / h)), 0)
-        k1 = min(int(np.floor((cz + half - origin[2]) / h)), nz - 1)
+        k0 = max(int(np.ceil(cz - half)), 0)
+        k1 = min(int(np.floor(cz + half)), nz - 1)
         if k1 >= k0:
-            total += prefix[i, j, k1 + 1] - prefix[i, j, k0]
+            total += prefix[j, k1 + 1] - prefix[j, k0]
+    return total
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _sphere_weight(prefix, origin, h, cx, cy, cz, r, stop):
+    """Weight of band voxels inside the sphere (cx, cy, cz, r mm), counted slice by slice; counting
+    stops, returning what it has, once the weight exceeds `stop` (-1: never)."""
+    nx = prefix.shape[0]
+    x, y, z, rv = (cx - origin[0]) / h, (cy - origin[1]) / h, (cz - origin[2]) / h, r / h
+    r2 = rv * rv
+    i0 = max(int(np.ceil(x - rv)), 0)
+    i1 = min(int(np.floor(x + rv)), nx - 1)
+    total = 0
+    for i in range(i0, i1 + 1):
+        dx = i - x
+        rx = r2 - dx * dx
+        if rx >= 0.0:
+            total += _slice_weight(prefix[i], y, z, rx)
+            if stop >= 0 and total > stop:
+                return total
     return total
 
 
 @njit(cache=True, nogil=True)
 def _count_in_spheres(prefix, origin, h, centres, radii):
     """Weight of band voxels inside each sphere: (n,) int64, from (nx, ny, nz + 1) running sums."""
-    nx = prefix.shape[0]
     out = np.zeros(len(radii), np.int64)
     for s in range(len(radii)):
-        cx, cy, cz, r = centres[s, 0], centres[s, 1], centres[s, 2], radii[s]
-        if not r >= 0.0:
-            continue
-        r2 = r * r
-        i0 = max(int(np.ceil((cx - r - origin[0]) / h)), 0)
-        i1 = min(int(np.floor((cx + r - origin[0]) / h)), nx - 1)
-        total = 0
-        for i in range(i0, i1 + 1):
-            dx = origin[0] + h * i - cx
-            rx = r2 - dx * dx
-            if rx >= 0.0:
-                total += _slice_weight(prefix, origin, h, cy, cz, rx, i)
-        out[s] = total
+        if radii[s] >= 0.0:
+            out[s] = _sphere_weight(prefix, origin, h, centres[s, 0], centres[s, 1], centres[s, 2], radii[s], -1)
     return out
 
 
@@ -75,7 +84,6 @@ def _best_in_groups(prefix, origin, h, centres, radii, add1, add2, bound):
     grow, so a candidate's count stops, slice by slice, once its score can no longer win. Candidates
     are tried smallest first (small spheres are cheap and usually good, and set a tight bound).
     """
-    nx = prefix.shape[0]
     g_n, c_n = radii.shape
     best_idx = np.full(g_n, -1, np.int64)
     best = bound.copy()
@@ -84,32 +92,23 @@ def _best_in_groups(prefix, origin, h, centres, radii, add1, add2, bound):
         order = np.argsort(radii[g])
         for o in range(c_n):
             s = order[o]
-            cx, cy, cz, r = centres[g, s, 0], centres[g, s, 1], centres[g, s, 2], radii[g, s]
-            a1, a2 = add1[g, s], add2[g, s]
+            r, a1, a2 = radii[g, s], add1[g, s], add2[g, s]
             if not r >= 0.0:
                 continue
             score = (0.0 + a1) + a2
             if score > best[g] or (score == best[g] and s > best_idx[g]):
                 continue
-            r2 = r * r
-            i0 = max(int(np.ceil((cx - r - origin[0]) / h)), 0)
-            i1 = min(int(np.floor((cx + r - origin[0]) / h)), nx - 1)
-            total = 0
-            lost = False
-            for i in range(i0, i1 + 1):
-                dx = origin[0] + h * i - cx
-                rx = r2 - dx * dx
-                if rx < 0.0:
-                    continue
-                total += _slice_weight(prefix, origin, h, cy, cz, rx, i)
-                score = (float(total) + a1) + a2
-                if score > best[g] or (score == best[g] and s > best_idx[g]):
-                    lost = True
-                    break
-            if not lost:
-                best[g] = score
-                best_idx[g] = s
-                best_count[g] = total
+            # The largest count that can still win: score (total + a1) + a2 must stay below best[g]
+            # (or equal it with a smaller index); one count more than that loses for sure.
+            room = best[g] - a1 - a2
+            stop = -1 if not room < 9e18 else max(int(np.floor(room)) + 1, 0)
+            total = _sphere_weight(prefix, origin, h, centres[g, s, 0], centres[g, s, 1], centres[g, s, 2], r, stop)
+            score = (float(total) + a1) + a2
+            if score > best[g] or (score == best[g] and s > best_idx[g]):
+                continue
+            best[g] = score
+            best_idx[g] = s
+            best_count[g] = total
     return best_idx, best, best_count
 
 
