@@ -67,6 +67,19 @@ def test_fit_tree_has_the_papers_shape():
         assert (np.diff(tree.parents[k]) >= 0).all()
 
 
+def test_default_fit_tree_is_nine_ary_with_up_to_729_leaves_and_the_octree_keeps_eight():
+    """Asked for nothing, the optimising builder splits each node in 9 (smaller leaves, fewer false
+    contacts); the octree still splits in 8, so `--method octree` alone is a valid request."""
+    mesh = parametric_tooth(11)
+    tree = build_sphere_tree(mesh)
+    sizes = [len(r) for r in tree.radii]
+    assert tree.branching == 9 and tree.depth == 4
+    assert sizes[0] == 1 and sizes[1] <= 9 and sizes[2] <= 81 and 600 <= sizes[3] <= 729
+    assert max(np.bincount(p).max() for p in tree.parents[1:]) <= 9
+    assert_conservative(tree, mesh)
+    assert build_sphere_tree(mesh, method="octree", depth=3).branching == 8
+
+
 def test_octree_spheres_are_equal_per_level_on_a_fine_mesh():
     """On a mesh much finer than the cells, every sphere of a level is the cell's circumsphere."""
     mesh = trimesh.creation.icosphere(subdivisions=5, radius=5.0)

@@ -33,7 +33,7 @@ def test_build_writes_one_sph_per_tooth_named_by_fdi(tmp_path, mesh_folder, monk
     assert sorted(p.name for p in out.iterdir()) == ["11.sph", "21.sph"]
     mesh = trimesh.load(mesh_folder / "tooth_11.stl")
     tree = read_sph(out / "11.sph", mesh.vertices, mesh.faces)
-    assert tree.depth == 4 and tree.branching == 8
+    assert tree.depth == 4 and tree.branching == 8  # an octree always splits in 8
     tree.validate(mesh.vertices, mesh.faces)
     assert any((tmp_path / "cache").glob("*.npz"))  # built through the cache
 

@@ -32,8 +32,9 @@ def test_sph_round_trip_is_exact_and_stays_conservative(tmp_path, method, depth)
     path = tmp_path / "11.sph"
     write_sph(tree, path)
     lines = path.read_text().splitlines()
-    assert lines[0].split() == [str(depth), "8"]
-    assert len(lines) == 1 + sum(8**k for k in range(depth))  # every slot of the complete tree
+    B = tree.branching  # the default: 9 for fit, 8 for octree
+    assert lines[0].split() == [str(depth), str(B)]
+    assert len(lines) == 1 + sum(B**k for k in range(depth))  # every slot of the complete tree
     back = read_sph(path, mesh.vertices, mesh.faces)
     _same(tree, back)
     assert (back.leaf_of_face >= 0).all()

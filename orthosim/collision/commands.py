@@ -36,6 +36,7 @@ def collide() -> None:
               help="Sphere-tree builder method (trees are cached on disk).")
 def validate(out_file: Path, poses: int, motions: int, samples: int, seed: int, real_folder: Path, trees: str) -> None:
     """Sphere-tree detectors vs the exact mesh test: misses, false-positive rates, contact times."""
+    from ..spheretree.build import DEPTH, default_branching
     from ..spheretree.cache import cached_sphere_tree
     from .validate import run_validation
 
@@ -44,7 +45,8 @@ def validate(out_file: Path, poses: int, motions: int, samples: int, seed: int, 
                    "thin-root sets only (pass --real-folder or set ORTHOSIM_SHARED_DATA)", err=True)
     report = run_validation(out_file, n_poses=poses, n_motions=motions, seed=seed, real_folder=real_folder,
                             samples=samples, tree_builder=lambda mesh: cached_sphere_tree(mesh, method=trees),
-                            tree_label=f"orthosim.spheretree cached_sphere_tree(method={trees!r}, 8 x 4 levels)")
+                            tree_label=f"orthosim.spheretree cached_sphere_tree(method={trees!r}, "
+                                       f"{default_branching(trees)} x {DEPTH} levels)")
     click.echo(json.dumps(_headline(report), indent=1))
     click.echo(f"report written to {out_file}")
 
@@ -79,12 +81,13 @@ def bench(out_file: Path | None, resolution: str, repeats: int, trees: str, keep
 
         keep()
     from ..parametric import parametric_dentition
+    from ..spheretree.build import DEPTH, default_branching
     from ..spheretree.cache import cached_sphere_tree
     from .bench import collision_timings
 
     res = collision_timings(parametric_dentition(resolution=resolution), repeats=repeats,
                             tree_builder=lambda mesh: cached_sphere_tree(mesh, method=trees))
-    res["model"] = f"parametric {resolution}, {trees} sphere trees (8 x 4 levels)"
+    res["model"] = f"parametric {resolution}, {trees} sphere trees ({default_branching(trees)} x {DEPTH} levels)"
     res["keep_freed_memory"] = keep_freed_memory
     text = json.dumps(res, indent=1)
     click.echo(text)

@@ -198,7 +198,7 @@ class CollisionModel:
         """Model of every present tooth; trees from `trees` when given, else `tree_builder(tooth.mesh)`.
 
         With neither, the project's cached builder (`orthosim.spheretree.cached_sphere_trees`, method
-        "fit", 8 x 4 levels) builds or loads them all at once, over every core.
+        "fit", its default branching x 4 levels) builds or loads them all at once, over every core.
         """
         import sys
 
@@ -226,7 +226,7 @@ class CollisionModel:
 
 
 def default_tree_builder() -> Callable[[trimesh.Trimesh], SphereTree]:
-    """The project's cached sphere-tree builder (`orthosim.spheretree`, method "fit", 8 x 4 levels)."""
+    """The project's cached sphere-tree builder (`orthosim.spheretree`, method "fit", its default branching x 4 levels)."""
     from ..spheretree import cached_sphere_tree
 
     return lambda mesh: cached_sphere_tree(mesh)

@@ -13,14 +13,16 @@ import os
 import tempfile
 import time
 
+from .build import DEPTH, default_branching
 from .cache import cached_sphere_trees
 
 TARGET_S = 10.0  # all 28 smooth teeth of the default model, built together on this 2-core machine
 
 
-def tree_build_timings(dentition, method: str = "fit", branching: int = 8, depth: int = 4,
+def tree_build_timings(dentition, method: str = "fit", branching: int | None = None, depth: int = DEPTH,
                        baseline: bool = True) -> dict:
     """Seconds to build (all cores; one process as baseline) and to load the trees of `dentition`."""
+    branching = default_branching(method) if branching is None else branching
     meshes = [dentition.teeth[n].mesh for n in dentition.fdis]
     record: dict = {"teeth": len(meshes), "triangles_total": int(sum(len(m.faces) for m in meshes)),
                     "method": method, "branching": branching, "depth": depth,

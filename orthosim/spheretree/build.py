@@ -12,12 +12,18 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import SphereTreeError
-from .fit import build_fit_tree
+from .fit import FIT_BRANCHING, build_fit_tree
 from .octree import MAX_OCTREE_DEPTH, build_octree_tree
 from .tree import SphereTree
 
 METHODS = ("fit", "octree")
 MAX_FIT_DEPTH = 8
+DEPTH = 4  # levels with the root, as the paper's trees
+
+
+def default_branching(method: str) -> int:
+    """The branching factor `method` builds when none is asked (an octree splits every cell in 8)."""
+    return 8 if method == "octree" else FIT_BRANCHING
 
 
 def mesh_arrays(mesh) -> tuple[np.ndarray, np.ndarray]:
@@ -46,11 +52,13 @@ def check_request(method: str, branching: int, depth: int, where: str | None = N
         raise SphereTreeError(where, "depth", f"depth {depth} is out of range for {method}", f"use 1 to {top} levels, the root included (the paper: 4)")
 
 
-def build_sphere_tree(mesh, method: str = "fit", branching: int = 8, depth: int = 4) -> SphereTree:
+def build_sphere_tree(mesh, method: str = "fit", branching: int | None = None, depth: int = DEPTH) -> SphereTree:
     """The sphere tree of a closed tooth mesh (trimesh or (vertices, faces), mm), in the mesh's frame.
 
-    `depth` counts levels with the root (4: 1, 8, 64, up to 512 leaves for branching 8).
+    `depth` counts levels with the root (4: 1, 9, 81, up to 729 leaves for branching 9);
+    `branching` defaults to `default_branching(method)`.
     """
+    branching = default_branching(method) if branching is None else branching
     check_request(method, branching, depth)
     vertices, faces = mesh_arrays(mesh)
     if method == "octree":

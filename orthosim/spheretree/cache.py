@@ -32,7 +32,7 @@ import numpy as np
 from ..atomic import atomic_path
 from ..lifeline import exit_with_parent
 from ..sourcedigest import source_digest
-from .build import build_sphere_tree, check_request, mesh_arrays
+from .build import DEPTH, build_sphere_tree, check_request, default_branching, mesh_arrays
 from .tree import SphereTree
 
 BUILDER_VERSION = 10
@@ -189,7 +189,8 @@ def _store(tree: SphereTree, entry: _Entry) -> None:
         pass  # a read-only or full cache folder costs a rebuild next time, never a failure
 
 
-def cached_sphere_tree(mesh, method: str = "fit", branching: int = 8, depth: int = 4, cache_dir: str | Path | None = None) -> SphereTree:
+def cached_sphere_tree(mesh, method: str = "fit", branching: int | None = None, depth: int = DEPTH,
+                       cache_dir: str | Path | None = None) -> SphereTree:
     """`build_sphere_tree` through the on-disk cache: load the tree if this mesh (or its mirror image)
     was built before with the same request."""
     return cached_sphere_trees([mesh], method, branching, depth, cache_dir, workers=1)[0]
@@ -200,14 +201,16 @@ def _build(args) -> SphereTree:
     return build_sphere_tree(mesh, method, branching, depth)
 
 
-def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int = 8, depth: int = 4,
+def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int | None = None, depth: int = DEPTH,
                         cache_dir: str | Path | None = None, workers: int | None = None,
                         progress: Callable[[int], None] | None = None) -> list[SphereTree]:
     """The trees of many meshes through the cache: each distinct mesh (a mirror pair counts once)
     is loaded or built once, the builds spread over `workers` processes (default: one per core).
 
     `progress(n)` is called as n more meshes are done. Trees come back in the order of `meshes`.
+    `branching` defaults to `default_branching(method)`.
     """
+    branching = default_branching(method) if branching is None else branching
     check_request(method, branching, depth)
     folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     entries = [_entry(m, method, branching, depth, folder) for m in meshes]

@@ -28,7 +28,7 @@ import click
 import numpy as np
 
 from ..errors import SphereTreeError
-from .build import METHODS, check_request
+from .build import FIT_BRANCHING, METHODS, check_request, default_branching
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply")
 
@@ -153,7 +153,8 @@ def _request_options(f):
                      help="How to read the tooth number in mesh file names (trees are then named by FDI). "
                           "Default: keep the file names. Cases and Open-Full-Jaw folders need none.")(f)
     f = click.option("--depth", type=int, default=None, help="Levels with the root [default: 4 for fit, 6 for octree].")(f)
-    f = click.option("--branch", "branching", type=int, default=8, show_default=True, help="Branching factor.")(f)
+    f = click.option("--branch", "branching", type=int, default=None,
+                     help=f"Branching factor [default: {FIT_BRANCHING} for fit, 8 for octree].")(f)
     f = click.option("--method", type=click.Choice(METHODS), default="fit", show_default=True,
                      help="fit: optimising builder (tight); octree: equal spheres per level (the paper's comparison).")(f)
     return f
@@ -186,6 +187,7 @@ def build(source: Path, method: str, branching: int, depth: int | None, out_dir:
     from .sph import write_sph
 
     depth = _depth(method, depth)
+    branching = default_branching(method) if branching is None else branching
     check_request(method, branching, depth, where="spheretree build")
     meshes = load_source(source, numbering)
     t0 = time.perf_counter()
@@ -220,6 +222,7 @@ def evaluate(sources: tuple[Path, ...], method: str, branching: int, depth: int 
     from .measure import measure_tree
 
     depth = _depth(method, depth)
+    branching = default_branching(method) if branching is None else branching
     check_request(method, branching, depth, where="spheretree eval")
     if surface_samples < 100_000:
         raise SphereTreeError("spheretree eval", "--surface-samples", f"{surface_samples} is too few to vouch for coverage", "use at least 100000")

@@ -45,6 +45,13 @@ from .outside_band import OutsideBand
 from .tree import SphereTree
 
 
+# The optimising builder's branching when none is asked: 9 (1, 9, 81 and up to 729 leaves at depth
+# 4). Smaller leaves leave thinner caps on the ridges and cusps teeth meet with, where the discrete
+# detector's false contacts come from: on real teeth, poses 0.1-0.25 mm apart read touching 17 % of
+# the time at 512 leaves (branching 8), 6-8 % at 729 (DEVELOPERS.md, "Leaf count").
+FIT_BRANCHING = 9
+
+
 @dataclass(frozen=True)
 class FitOptions:
     """Knobs of the optimising builder (defaults tuned on the parametric and real teeth)."""
@@ -653,7 +660,7 @@ def group_leaves(positions: np.ndarray, branching: int, depth: int, rng) -> list
 
 
 def build_fit_tree(
-    vertices: np.ndarray, faces: np.ndarray, branching: int = 8, depth: int = 4, options: FitOptions | None = None
+    vertices: np.ndarray, faces: np.ndarray, branching: int = FIT_BRANCHING, depth: int = 4, options: FitOptions | None = None
 ) -> SphereTree:
     """Optimising sphere tree of a closed mesh ((n, 3) float64 mm, (m, 3) int): see the module text."""
     options = options or FitOptions()

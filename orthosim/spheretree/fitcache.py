@@ -15,6 +15,7 @@ import json
 from pathlib import Path
 
 from ..atomic import write_json
+from .build import DEPTH, default_branching
 from .cache import _entry, cached_sphere_tree, default_cache_dir
 from .measure import FitReport, measure_tree
 
@@ -28,9 +29,10 @@ def fits_dir(cache_dir: str | Path | None = None) -> Path:
     return trees.parent / "treefits"
 
 
-def cached_fit(mesh, method: str = "fit", branching: int = 8, depth: int = 4, cache_dir: str | Path | None = None,
+def cached_fit(mesh, method: str = "fit", branching: int | None = None, depth: int = DEPTH, cache_dir: str | Path | None = None,
                samples: dict | None = None) -> FitReport:
     """The FitReport of `mesh`'s cached sphere tree, from disk when measured before."""
+    branching = default_branching(method) if branching is None else branching
     samples = dict(REPORT_SAMPLES if samples is None else samples)
     entry = _entry(mesh, method, branching, depth, default_cache_dir() if cache_dir is None else Path(cache_dir))
     tag = "-".join(str(samples[k]) for k in sorted(samples))
