@@ -23,25 +23,25 @@ from .inside import CrossingIndex
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _cells_within(c, half, n):
+    """First and last of the grid indices 0..n-1 within `half` of `c` (voxel units; last < first
+    when none)."""
+    return max(int(np.ceil(c - half)), 0), min(int(np.floor(c + half)), n - 1)
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _slice_weight(prefix, cy, cz, rx):
     """Weight of band voxels in one x slice (`prefix` (ny, nz + 1) running sums along z) inside a
     sphere centred at (., cy, cz) whose squared radius in that slice is rx >= 0, all in voxel units
     from the grid's first centre: one running-sum subtraction per (x, y) column it crosses."""
-    ny, nz = prefix.shape[0], prefix.shape[1] - 1
-    ry = np.sqrt(rx)
-    j0 = max(int(np.ceil(cy - ry)), 0)
-    j1 = min(int(np.floor(cy + ry)), ny - 1)
+    j0, j1 = _cells_within(cy, np.sqrt(rx), prefix.shape[0])
     total = 0
     for j in range(j0, j1 + 1):
-        dy = j - cy
-        rz = rx - dy * dy
-        if rz < 0.0:
-            continue
-        half = np.sqrt(rz)
-        k0 = max(int(np.ceil(cz - half)), 0)
-        k1 = min(int(np.floor(cz + half)), nz - 1)
-        if k1 >= k0:
-            total += prefix[j, k1 + 1] - prefix[j, k0]
+        rz = rx - (j - cy) ** 2
+        if rz >= 0.0:
+            k0, k1 = _cells_within(cz, np.sqrt(rz), prefix.shape[1] - 1)
+            if k1 >= k0:
+                total += prefix[j, k1 + 1] - prefix[j, k0]
     return total
 
 
@@ -49,15 +49,12 @@ def _slice_weight(prefix, cy, cz, rx):
 def _sphere_weight(prefix, origin, h, cx, cy, cz, r, stop):
     """Weight of band voxels inside the sphere (cx, cy, cz, r mm), counted slice by slice; counting
     stops, returning what it has, once the weight exceeds `stop` (-1: never)."""
-    nx = prefix.shape[0]
-    x, y, z, rv = (cx - origin[0]) / h, (cy - origin[1]) / h, (cz - origin[2]) / h, r / h
-    r2 = rv * rv
-    i0 = max(int(np.ceil(x - rv)), 0)
-    i1 = min(int(np.floor(x + rv)), nx - 1)
+    x, rv = (cx - origin[0]) / h, r / h
+    y, z = (cy - origin[1]) / h, (cz - origin[2]) / h
+    i0, i1 = _cells_within(x, rv, prefix.shape[0])
     total = 0
     for i in range(i0, i1 + 1):
-        dx = i - x
-        rx = r2 - dx * dx
+        rx = rv * rv - (i - x) ** 2
         if rx >= 0.0:
             total += _slice_weight(prefix[i], y, z, rx)
             if stop >= 0 and total > stop:
