@@ -48,7 +48,7 @@ from .tree import SphereTree
 # The optimising builder's branching when none is asked: 9 (1, 9, 81 and up to 729 leaves at depth
 # 4). Smaller leaves leave thinner caps on the ridges and cusps teeth meet with, where the discrete
 # detector's false contacts come from: on real teeth, poses 0.1-0.25 mm apart read touching 17 % of
-# the time at 512 leaves (branching 8), 6-8 % at 729 (DEVELOPERS.md, "Leaf count").
+# the time at 512 leaves (branching 8), 6-10 % at 729 (DEVELOPERS.md, "9-ary trees by default").
 FIT_BRANCHING = 9
 
 
