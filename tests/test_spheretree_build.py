@@ -296,3 +296,28 @@ def test_thin_real_lower_incisor_tree_holds_little_outside_volume():
     rep = measure_tree(build_sphere_tree((v, f), method="fit"), v, f, sphere_samples=400_000, n_surface=100_000)
     assert rep.surface_coverage == 1.0
     assert rep.sov_sum < 0.07, f"summed SOV {rep.sov_sum:.4f} +/- {rep.sov_sum_stderr:.4f}"
+
+
+def test_node_vertex_groups_list_each_nodes_distinct_vertices_in_order_padded_with_the_first():
+    """The compiled gather every leaf and node fit starts from: per node, the sorted distinct
+    vertices of its faces, padded by repeating the first (a repeated point changes no enclosing
+    sphere), a row of -1 for a node without faces; a node number out of range is refused."""
+    from orthosim.spheretree.enclose import node_vertex_groups
+
+    rng = np.random.default_rng(8)
+    for _ in range(50):
+        n_nodes = int(rng.integers(1, 30))
+        faces = rng.integers(0, 200, (int(rng.integers(1, 400)), 3))
+        node = rng.integers(0, n_nodes, len(faces))
+        out = node_vertex_groups(faces, node, n_nodes)
+        width = max(1, max(len(np.unique(faces[node == k])) for k in range(n_nodes)))
+        assert out.shape == (n_nodes, width)
+        for k in range(n_nodes):
+            expect = np.unique(faces[node == k])
+            if not len(expect):
+                assert (out[k] == -1).all()
+                continue
+            np.testing.assert_array_equal(out[k, :len(expect)], expect)
+            assert (out[k, len(expect):] == expect[0]).all()
+    with pytest.raises(ValueError, match="node_of_face"):
+        node_vertex_groups(np.array([[0, 1, 2]]), np.array([2]), 2)

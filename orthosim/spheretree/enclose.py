@@ -20,6 +20,8 @@ def node_vertex_groups(faces: np.ndarray, node_of_face: np.ndarray, n_nodes: int
     of each node, in increasing order. A node without faces gets a row of -1.
     """
     n_vertices = int(faces.max()) + 1 if len(faces) else 1
+    if len(node_of_face) and not 0 <= int(node_of_face.min()) <= int(node_of_face.max()) < n_nodes:
+        raise ValueError(f"node_of_face must lie in [0, {n_nodes})")  # the compiled gather does not check
     return _node_vertices(np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(node_of_face, dtype=np.int64),
                           int(n_nodes), n_vertices)
 
