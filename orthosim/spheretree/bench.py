@@ -22,7 +22,7 @@ TARGET_S = 10.0  # all 28 smooth teeth of the default model, built together on t
 def tree_build_timings(dentition, method: str = "fit", branching: int | None = None, depth: int = DEPTH,
                        baseline: bool = True) -> dict:
     """Seconds to build (all cores; one process as baseline) and to load the trees of `dentition`."""
-    branching = default_branching(method) if branching is None else branching
+    branching = default_branching(method, branching)
     meshes = [dentition.teeth[n].mesh for n in dentition.fdis]
     record: dict = {"teeth": len(meshes), "triangles_total": int(sum(len(m.faces) for m in meshes)),
                     "method": method, "branching": branching, "depth": depth,

@@ -21,8 +21,11 @@ MAX_FIT_DEPTH = 8
 DEPTH = 4  # levels with the root, as the paper's trees
 
 
-def default_branching(method: str) -> int:
-    """The branching factor `method` builds when none is asked (an octree splits every cell in 8)."""
+def default_branching(method: str, branching: int | None = None) -> int:
+    """`branching` when one is asked, else the one `method` builds by default (an octree splits
+    every cell in 8; the optimising builder `FIT_BRANCHING`)."""
+    if branching is not None:
+        return branching
     return 8 if method == "octree" else FIT_BRANCHING
 
 
@@ -58,7 +61,7 @@ def build_sphere_tree(mesh, method: str = "fit", branching: int | None = None, d
     `depth` counts levels with the root (4: 1, 9, 81, up to 729 leaves for branching 9);
     `branching` defaults to `default_branching(method)`.
     """
-    branching = default_branching(method) if branching is None else branching
+    branching = default_branching(method, branching)
     check_request(method, branching, depth)
     vertices, faces = mesh_arrays(mesh)
     if method == "octree":

@@ -210,7 +210,7 @@ def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int | 
     `progress(n)` is called as n more meshes are done. Trees come back in the order of `meshes`.
     `branching` defaults to `default_branching(method)`.
     """
-    branching = default_branching(method) if branching is None else branching
+    branching = default_branching(method, branching)
     check_request(method, branching, depth)
     folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     entries = [_entry(m, method, branching, depth, folder) for m in meshes]

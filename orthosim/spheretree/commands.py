@@ -187,7 +187,7 @@ def build(source: Path, method: str, branching: int, depth: int | None, out_dir:
     from .sph import write_sph
 
     depth = _depth(method, depth)
-    branching = default_branching(method) if branching is None else branching
+    branching = default_branching(method, branching)
     check_request(method, branching, depth, where="spheretree build")
     meshes = load_source(source, numbering)
     t0 = time.perf_counter()
@@ -222,7 +222,7 @@ def evaluate(sources: tuple[Path, ...], method: str, branching: int, depth: int 
     from .measure import measure_tree
 
     depth = _depth(method, depth)
-    branching = default_branching(method) if branching is None else branching
+    branching = default_branching(method, branching)
     check_request(method, branching, depth, where="spheretree eval")
     if surface_samples < 100_000:
         raise SphereTreeError("spheretree eval", "--surface-samples", f"{surface_samples} is too few to vouch for coverage", "use at least 100000")

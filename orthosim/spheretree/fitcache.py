@@ -32,7 +32,7 @@ def fits_dir(cache_dir: str | Path | None = None) -> Path:
 def cached_fit(mesh, method: str = "fit", branching: int | None = None, depth: int = DEPTH, cache_dir: str | Path | None = None,
                samples: dict | None = None) -> FitReport:
     """The FitReport of `mesh`'s cached sphere tree, from disk when measured before."""
-    branching = default_branching(method) if branching is None else branching
+    branching = default_branching(method, branching)
     samples = dict(REPORT_SAMPLES if samples is None else samples)
     entry = _entry(mesh, method, branching, depth, default_cache_dir() if cache_dir is None else Path(cache_dir))
     tag = "-".join(str(samples[k]) for k in sorted(samples))
