@@ -30,7 +30,7 @@ def node_vertex_groups(faces: np.ndarray, node_of_face: np.ndarray, n_nodes: int
 def _node_vertices(faces, node_of_face, n_nodes, n_vertices):
     """`node_vertex_groups` compiled: faces bucketed by node, each node's vertices gathered once
     (a vertex is stamped with the last node that took it), then sorted (the builder asks this a
-    thousand times a tooth; numpy's unique of node x vertex keys cost ten times as much)."""
+    thousand times a tooth; numpy's unique of node x vertex keys cost 3-7 times as much)."""
     n_faces = len(faces)
     first_face = np.zeros(n_nodes + 1, np.int64)
     for f in range(n_faces):
