@@ -14,10 +14,10 @@ from pathlib import Path
 
 import click
 
-from . import __version__
-from .detectors import DETECTORS, PAPER_DETECTORS
-from .errors import OrthosimError
-from .run import MIN_ANIMATION_S, RunOptions
+from orthosim import __version__
+from orthosim.collision.detectors import DETECTORS, PAPER_DETECTORS
+from orthosim.errors import OrthosimError
+from orthosim.runtime.run import MIN_ANIMATION_S, RunOptions
 
 DEMO_VIEWS = ("right_buccal", "maxillary_occlusal")
 
@@ -46,7 +46,7 @@ def _steps(ctx, param, value: str | None) -> tuple[int, ...] | None:
 
 def _views(ctx, param, value: tuple[str, ...]) -> tuple[str, ...]:
     """Camera presets checked while the options are read: a bad --view stops before any work."""
-    from render.cameras import check_view  # numpy only, no OpenGL
+    from orthosim_render.cameras import check_view  # numpy only, no OpenGL
 
     return tuple(check_view(v) for v in value)
 
@@ -64,6 +64,9 @@ class _LazyGroup(click.Group):
         "batch": ("orthosim.batch.commands", "batch", "Many runs and parameter sweeps, on every core or a Dask cluster."),
     }
 
+    # commands that measurement (orthosim_bench, outside the product) adds to a lazy group
+    extra = {"collide": (("orthosim_bench.collision", "bench_command"),)}
+
     def list_commands(self, ctx):
         return sorted([*super().list_commands(ctx), *self.lazy])
 
@@ -72,7 +75,11 @@ class _LazyGroup(click.Group):
             module, attr, _ = self.lazy[name]
             import importlib
 
-            return getattr(importlib.import_module(module), attr)
+            group = getattr(importlib.import_module(module), attr)
+            for extra_module, extra_attr in self.extra.get(name, ()):
+                command = getattr(importlib.import_module(extra_module), extra_attr)
+                group.add_command(command, command.name)
+            return group
         return super().get_command(ctx, name)
 
     def format_commands(self, ctx, formatter):
@@ -147,7 +154,7 @@ def run(case: Path, out_dir: Path | None, detector: str | None, **render_opts) -
 @render_options
 def demo(out_dir: Path, **render_opts) -> None:
     """Run the paper's case 1 (cases/case1_...) into out/demo/."""
-    from .case import DEFAULT_CASE
+    from orthosim.exchange.case import DEFAULT_CASE
 
     render_opts["views"] = render_opts.get("views") or DEMO_VIEWS
     _run_case(DEFAULT_CASE, out_dir, run_options(None, render_opts))
@@ -161,9 +168,9 @@ def demo(out_dir: Path, **render_opts) -> None:
 @click.option("--no-render", is_flag=True, help="Write occlusion.json only.")
 def occlusion(case: Path, out_dir: Path | None, size, no_render: bool) -> None:
     """Occlusal measures and contacts per pair of a case's model at rest; contact areas drawn (Figure 7)."""
-    from .atomic import write_json
-    from .case import load_case
-    from .occlusalcontacts import occlusal_contacts, occlusion_record
+    from orthosim.storage.atomic import write_json
+    from orthosim.exchange.case import load_case
+    from orthosim.analysis.occlusalcontacts import occlusal_contacts, occlusion_record
 
     dent = load_case(case).build_dentition()
     out_dir = out_dir or Path("out") / f"{case.stem}-occlusion"
@@ -171,7 +178,7 @@ def occlusion(case: Path, out_dir: Path | None, size, no_render: bool) -> None:
     record = occlusion_record(dent, contacts)
     write_json(out_dir / "occlusion.json", record)
     if not no_render:
-        from render.occlusion_figure import write_occlusal_contacts
+        from orthosim_render.occlusion_figure import write_occlusal_contacts
 
         write_occlusal_contacts(dent, contacts, out_dir, size)
     click.echo(f"{len(record['contacts'])} facing pairs in contact; overjet {record.get('overjet_mm', float('nan')):.2f} mm, "
@@ -182,7 +189,7 @@ def occlusion(case: Path, out_dir: Path | None, size, no_render: bool) -> None:
 @click.argument("cases", nargs=-1, required=True, type=click.Path(path_type=Path))
 def check(cases: tuple[Path, ...]) -> None:
     """Validate case files without running them."""
-    from .case import load_case
+    from orthosim.exchange.case import load_case
 
     for path in cases:
         case = load_case(path)
@@ -218,15 +225,15 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
     """
-    from render.bench import run_bench
+    from orthosim_bench.render import run_bench
 
-    from .atomic import write_json
+    from orthosim.storage.atomic import write_json
 
     record = run_bench(case, frames=frames, warmup=warmup, size=size, n_markers=markers,
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
                        step_days=step_days, tree_build=not no_tree_build, startup=not no_startup,
                        staging=not no_staging, batch=not no_batch, report=not no_report, report_runs=report_runs,
-                       memory=not no_memory)
+                       memory=not no_memory, run_case=run_case)
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
@@ -272,21 +279,21 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
 @click.option("--gif", is_flag=True, help="Also write animation.gif.")
 def stage(case: Path, out_dir: Path, limits: str | None, no_render: bool, size, views, frames_per_stage: int, gif: bool) -> None:
     """Split a case's set-up ([target]) into aligner stages: within per-stage limits, free of contact."""
-    from .runfolder import write_run_record
-    from .staging.chart import summary_line, write_outputs
-    from .staging.commands import plan_case
-    from .staging.limits import StageLimits
+    from orthosim.runtime.runfolder import write_run_record
+    from orthosim.staging.chart import summary_line, write_outputs
+    from orthosim.staging.commands import plan_case
+    from orthosim.staging.limits import StageLimits
 
     parsed = StageLimits.parse(limits)
     if not no_render:
-        from render.cameras import check_view
+        from orthosim_render.cameras import check_view
 
         views = [check_view(v) for v in views or ("frontal", "mandibular_occlusal")]
     run = plan_case(case, parsed)
     extra = {"kind": "staging", "stages": run.plan.n_stages, "lower_bound": run.plan.lower_bound,
              "ipr_total_mm": run.plan.ipr_total_mm, "planning_s": run.plan.planning_s}
     if not no_render:
-        from render.staging import render_staging
+        from orthosim_render.staging import render_staging
 
         extra["animation"] = render_staging(run, out_dir, views=views, size=size,
                                             frames_per_stage=frames_per_stage, gif=gif)
@@ -312,8 +319,8 @@ def imgdiff(golden: Path, candidate: Path, diff_path: Path | None, max_level: in
     Exact when the candidate was drawn by the GL renderer and Mesa version the golden's sidecar
     (GOLDEN.json) names, else within tolerance (SSIM reported). See render/imgdiff.py.
     """
-    from render.imgdiff import Tolerance, imgdiff as compare
-    from render.regression import this_machine_gl
+    from orthosim_render.imgdiff import Tolerance, imgdiff as compare
+    from orthosim_render.regression import this_machine_gl
 
     outcome = compare(golden, candidate, diff_path=diff_path, tolerance=Tolerance(max_level, max_fraction),
                       update=update, this_machine=this_machine_gl)
@@ -335,14 +342,14 @@ def imgdiff(golden: Path, candidate: Path, diff_path: Path | None, max_level: in
 def report(inputs: tuple[Path, ...], out_dir: Path, detectors: tuple[str, ...], from_runs: bool, pdf: bool,
            render_runs: bool, size) -> None:
     """Contact-area report: index.html, report.json (and report.pdf) for cases or finished runs."""
-    from render.report.page import build_report
+    from orthosim_render.report.page import build_report
 
     if from_runs:
         if detectors:
             raise click.UsageError("--detector chooses how to run cases; with --from-runs the runs say their detector")
         run_dirs = list(inputs)
     else:
-        from .case import load_case
+        from orthosim.exchange.case import load_case
 
         for path in inputs:
             load_case(path)  # every case file checked before any run starts
@@ -354,7 +361,7 @@ def report(inputs: tuple[Path, ...], out_dir: Path, detectors: tuple[str, ...], 
                 run_case(path, run_dir, det, opts)
                 run_dirs.append(run_dir)
     if pdf:
-        from render.report.browser import find_chromium
+        from orthosim_render.report.browser import find_chromium
 
         find_chromium()  # fail before the work, not after it
     record = build_report(run_dirs, out_dir, pdf=pdf, size=size, progress=lambda text: click.echo(f"report: {text}"))
@@ -379,7 +386,7 @@ def run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: 
 def check_render_options(render_opts: dict) -> None:
     """Refuse an unknown --view before any work (the camera presets live in render/)."""
     if not render_opts.get("no_render"):
-        from render.cameras import check_view
+        from orthosim_render.cameras import check_view
 
         for view in render_opts.get("views") or ():
             check_view(view)
@@ -402,15 +409,15 @@ def run_options(detector: str | None, opts: dict) -> RunOptions:
 
 
 def _run_case(case_path: Path, out_dir: Path, options: RunOptions) -> dict:
-    """One run (`orthosim.run.run_case`) with this package's renderer; returns the run record (run.json)."""
-    from .run import run_case
+    """One run (`orthosim.runtime.run.run_case`) with this package's renderer; returns the run record (run.json)."""
+    from orthosim.runtime.run import run_case
 
     def check_view(name: str) -> str:
-        from render.cameras import check_view
+        from orthosim_render.cameras import check_view
 
         return check_view(name)
 
-    from .outputfolder import output_folder
+    from orthosim.runtime.outputfolder import output_folder
 
     # out_dir is checked and locked now, before any work; the run is written into a private
     # staging folder that replaces it whole at the end, so a failed or stopped run leaves it as it was
@@ -429,9 +436,9 @@ def _render_steps(dent, records, out_dir: Path, options: RunOptions, *, extracte
                   total: int, progress: bool, case) -> dict:
     """Draw every simulated step (`per_step` frames each) into out_dir: frames, animation, split views,
     with the overlay (case, detector, day N of M, legend, FDI labels on request) unless --no-overlay."""
-    from render.animation import render_run
-    from render.overlay import FrameCaption
-    from render.timeline import frames_from_steps
+    from orthosim_render.animation import render_run
+    from orthosim_render.overlay import FrameCaption
+    from orthosim_render.timeline import frames_from_steps
 
     caption = FrameCaption(case.name, options.detector, case.step_days, case.duration_days,
                            labels=options.labels) if options.overlay else None
@@ -452,7 +459,7 @@ def entry() -> None:
     """Console-script entry: run the CLI, turning user errors into one line and an exit code."""
     import warnings
 
-    from .lifeline import sigterm_as_interrupt, terminated
+    from orthosim.runtime.lifeline import sigterm_as_interrupt, terminated
 
     warnings.showwarning = _one_line_warning
     sigterm_as_interrupt()

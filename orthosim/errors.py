@@ -22,7 +22,7 @@ class OrthosimError(Exception):
         super().__init__(self._format())
 
     def __reduce__(self):
-        # rebuilt from its parts, so that an error raised in a child process (`orthosim.background`)
+        # rebuilt from its parts, so that an error raised in a child process (`orthosim.runtime.background`)
         # reaches the CLI as the same type with the same one-line message
         return (type(self), (self.where, self.field, self.problem, self.fix))
 

@@ -3,8 +3,8 @@
 `render_run` is the CLI's entry point: it builds the scene once, renders every state from each
 chosen view (several views are tiled into one frame, left to right, three per row), and hands the
 images to a `FrameSink`, which encodes on background threads while the next frame renders:
-  - PNG: one file per frame, `frames/NNNNN.png`, encoded by `render.png` (3x faster than
-    Pillow's writer), each written to a temporary file then renamed (`orthosim.atomic`);
+  - PNG: one file per frame, `frames/NNNNN.png`, encoded by `orthosim_render.png` (3x faster than
+    Pillow's writer), each written to a temporary file then renamed (`orthosim.storage.atomic`);
   - MP4: H.264 through the ffmpeg binary that the `imageio-ffmpeg` wheel ships, fed through a
     pipe (the encoder runs in its own process), written to a temporary file renamed at the end;
   - GIF (optional): the frame's own size, palette per frame; for long runs every k-th frame only,
@@ -30,12 +30,12 @@ from typing import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from orthosim.atomic import atomic_path
-from orthosim.background import release_compiler_pages, release_freed_heap
+from orthosim.storage.atomic import atomic_path
+from orthosim.runtime.background import release_compiler_pages, release_freed_heap
 
-from .cameras import check_view
-from .frame_state import FrameState
-from .png import encode_png
+from orthosim_render.cameras import check_view
+from orthosim_render.frame_state import FrameState
+from orthosim_render.png import encode_png
 
 VIDEO_FPS = 30
 GIF_MAX_FRAMES = 240
@@ -162,7 +162,7 @@ class FrameSink:
         writer = imageio_ffmpeg.write_frames(
             str(tmp), (w + self._pad[1], h + self._pad[0]), pix_fmt_in="rgb24", fps=self.video_fps,
             # quiet: ffmpeg's own lines would break the one-line error a failed write ends in (a full
-            # disk shows as the writer's OSError, which orthosim.outputfolder turns into that line)
+            # disk shows as the writer's OSError, which orthosim.runtime.outputfolder turns into that line)
             codec="libx264", macro_block_size=1, ffmpeg_log_level="quiet",
             output_params=["-preset", "ultrafast", "-crf", "20"] + (_ONE_THREAD_FFMPEG if self.inline else []),
         )
@@ -342,13 +342,13 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
     """Render every state in `frames` into out_dir (frames/NNNNN.png, animation.mp4, animation.gif).
 
     `frames` is taken ahead on a thread (`prefetch`, unless single_core); `orthosim run` feeds it the records of a
-    simulation running in a child process (`orthosim.background`), so that simulating the next
+    simulation running in a child process (`orthosim.runtime.background`), so that simulating the next
     steps and drawing this one use both cores instead of taking turns for one GIL.
 
     fps: the animation's frames per second. split_views: also write each view's own PNG per frame.
     total: the number of frames, when known (for the progress bar). A state given twice in a row
     (the same object: a step in which nothing moved) is drawn once and its image repeated.
-    `caption` (a `render.overlay.FrameCaption`) draws the shared overlay onto every frame: case,
+    `caption` (a `orthosim_render.overlay.FrameCaption`) draws the shared overlay onto every frame: case,
     detector, day N of M, the colour legend and, if it asks for them, FDI labels.
     on_frame(state, scene): called once each frame is handed to the encoders (`orthosim bench`
     times this very loop frame by frame through it).
@@ -359,14 +359,14 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
 
     Memory: once the scene is built, the dentition's meshes forget their trimesh caches
     (`Dentition.drop_mesh_caches`: derived values, computed again if asked for), and once the first
-    frame is drawn llvmpipe's LLVM code pages are handed back (`orthosim.background.release_compiler_pages`).
+    frame is drawn llvmpipe's LLVM code pages are handed back (`orthosim.runtime.background.release_compiler_pages`).
 
     Returns {"frames": n, "fps": end-to-end frames per second (render, read back, encode, write),
     "render_fps": ..., "views": [...], "size": [w, h], "encode_s": time to flush the encoders, ...}.
     The caller records it in run.json (it varies with the machine).
     """
-    from .renderer import Renderer
-    from .scene import DentitionScene
+    from orthosim_render.renderer import Renderer
+    from orthosim_render.scene import DentitionScene
 
     views = [check_view(v) for v in (views or ("frontal",))]
     out_dir = Path(out_dir)
@@ -379,7 +379,7 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
     bar = _Progress(progress, total)
     overlay = None
     if caption is not None:
-        from .overlay import FrameOverlay
+        from orthosim_render.overlay import FrameOverlay
 
         overlay = FrameOverlay(caption, dentition, size)
     dentition.drop_mesh_caches()  # the scene and overlay keep their own arrays; the meshes' derived ones go
@@ -432,6 +432,6 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
         "video_fps": fps,
         "encode_s": encode_s,
         "overlay": None if caption is None else {"labels": caption.labels},
-        # relative to out_dir: a run folder may be written in a staging place and moved (orthosim.outputfolder)
+        # relative to out_dir: a run folder may be written in a staging place and moved (orthosim.runtime.outputfolder)
         "outputs": {k: os.path.relpath(v, out_dir) for k, v in written.items() if k != "frames"},
     }

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from orthosim.errors import OrthosimError
-from orthosim.fdi import Arch
+from orthosim.model.fdi import Arch
 
 # name -> (viewing direction in the arch frame, image-up direction, arches shown)
 PRESETS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float], frozenset[Arch]]] = {

@@ -1,7 +1,7 @@
 """The crown/root boundary drawn as a smooth line: triangles that straddle the CEJ plane are cut along it.
 
 A tooth's faces are labelled crown or root by which side of its CEJ plane (local y = 0) their
-centres lie (`orthosim.tooth.part_of_faces`); coloured face by face, the boundary of a dense real
+centres lie (`orthosim.model.tooth.part_of_faces`); coloured face by face, the boundary of a dense real
 tooth comes out as a staircase of whole triangles. For drawing only, each straddling triangle is
 cut along the plane into one triangle and one quad (two triangles), new vertices placed on its
 edges with positions and normals interpolated linearly, so crown and root colours meet on the
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from orthosim.tooth import CROWN, ROOT, part_of_faces
+from orthosim.model.tooth import CROWN, ROOT, part_of_faces
 
 
 @dataclass(frozen=True)

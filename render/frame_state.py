@@ -2,7 +2,7 @@
 
 `FrameState` is the whole interface between the simulation (and collision detection) and the
 drawing code: the simulation writes one per step, the renderer only reads it. All positions are in
-the arch frame of `orthosim.dentition`, in millimetres.
+the arch frame of `orthosim.model.dentition`, in millimetres.
 """
 
 from __future__ import annotations

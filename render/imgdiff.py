@@ -12,7 +12,7 @@ the comparison picks its mode from it:
     beside, as a figure for the reader, not as the verdict.
 The diff image shows golden | candidate | the differences in a strong colour over a grey copy of
 the golden, side by side. `orthosim imgdiff` (the CLI) and the pytest fixture
-(`render.pytest_plugin`) are both thin layers over `compare_files` / `compare_images`.
+(`orthosim_render.pytest_plugin`) are both thin layers over `compare_files` / `compare_images`.
 """
 
 from __future__ import annotations
@@ -27,10 +27,10 @@ from pathlib import Path
 import numpy as np
 
 from orthosim import __version__
-from orthosim.atomic import write_bytes, write_json
+from orthosim.storage.atomic import write_bytes, write_json
 from orthosim.errors import OrthosimError
 
-from .png import encode_png
+from orthosim_render.png import encode_png
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 DIFF_COLOUR = (255, 0, 220)  # differences beyond tolerance: a magenta no lit tooth or grey can take
@@ -70,7 +70,7 @@ class GoldenSidecar:
     gl_renderer: str | None = None  # GL_RENDERER, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)"
     mesa_version: str | None = None  # from GL_VERSION, e.g. "22.3.6"
     size: tuple[int, int] | None = None  # (width, height) px
-    view: str | None = None  # camera preset (render.cameras)
+    view: str | None = None  # camera preset (orthosim_render.cameras)
     orthosim_version: str | None = __version__
     case_file: str | None = None
     case_sha256: str | None = None

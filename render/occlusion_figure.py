@@ -1,6 +1,6 @@
 """The occlusal contact areas of a bite drawn on the teeth: the paper's Figure 7, on any model.
 
-Each facing pair's contact faces (`orthosim.occlusalcontacts`) are handed to the scene as small
+Each facing pair's contact faces (`orthosim.analysis.occlusalcontacts`) are handed to the scene as small
 contact spheres on the tooth surface, and the scene's face painting (`DentitionScene`,
 `color_contact_faces`) colours every vertex inside one: the contact areas come out as coloured
 patches on the maxillary and mandibular occlusal views (and any other view asked for).
@@ -13,10 +13,10 @@ from typing import Sequence
 
 import numpy as np
 
-from orthosim.atomic import write_bytes
+from orthosim.storage.atomic import write_bytes
 
-from .frame_state import FrameState
-from .png import encode_png
+from orthosim_render.frame_state import FrameState
+from orthosim_render.png import encode_png
 
 FIGURE_VIEWS = ("maxillary_occlusal", "mandibular_occlusal")
 PATCH_RADIUS_MM = 0.25  # each contact face centre colours the surface this far around it
@@ -35,8 +35,8 @@ def contact_state(dentition, contacts, poses=None) -> FrameState:
 def render_occlusal_contacts(dentition, contacts, size=(640, 480), views: Sequence[str] = FIGURE_VIEWS,
                              poses=None) -> dict[str, np.ndarray]:
     """view name -> (h, w, 3) uint8 image of the teeth with their occlusal contact areas coloured."""
-    from .renderer import Renderer
-    from .scene import DentitionScene
+    from orthosim_render.renderer import Renderer
+    from orthosim_render.scene import DentitionScene
 
     scene = DentitionScene(dentition, size, color_contact_faces=True, show_markers=False)
     scene.update(contact_state(dentition, contacts, poses))

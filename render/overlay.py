@@ -7,7 +7,7 @@ Pillow (FreeType, the font Pillow ships, so no system font is needed) into small
 are cached, and each frame only blends the patches it needs onto its pixels with numpy. Patches
 are blended where they fit; a patch that would leave the image is clipped.
 
-Legend colours are those of `render.scene`: moving teeth (the mint tint on enamel), contacts (the
+Legend colours are those of `orthosim_render.scene`: moving teeth (the mint tint on enamel), contacts (the
 contact red) and extraction gaps (an amber ring where the extracted tooth's crown stood).
 """
 
@@ -19,7 +19,7 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
-from .scene import BACKGROUND, CONTACT_COLOR, CROWN_COLOR, MOVING_TINT
+from orthosim_render.scene import BACKGROUND, CONTACT_COLOR, CROWN_COLOR, MOVING_TINT
 
 TEXT_COLOR = (236, 238, 242)
 PANEL_COLOR = (16, 18, 24, 178)  # translucent dark panel behind text (RGBA)
@@ -178,10 +178,10 @@ def font_px_for(size: tuple[int, int]) -> int:
 def label_view(image: np.ndarray, view, dentition, poses: Mapping[int, np.ndarray], teeth: Iterable[int],
                extracted: Iterable[int] = (), font_px: int | None = None) -> None:
     """Write each shown tooth's FDI number at its projected crown centre in `view` (a
-    `render.cameras.CameraView`), nearest teeth first, skipping a label that would cover one
+    `orthosim_render.cameras.CameraView`), nearest teeth first, skipping a label that would cover one
     already placed (in a frontal view the molars hide behind the premolars); ring each extracted
     tooth's crown where it stood at rest. `image` (h, w, 3|4) uint8 is changed in place."""
-    from orthosim.fdi import arch_of
+    from orthosim.model.fdi import arch_of
 
     h, w = image.shape[:2]
     px = font_px or font_px_for((w, h))

@@ -4,7 +4,7 @@ Registered through the `pytest11` entry point, so every pytest run of a project 
 orthosim loads it (ours too). It therefore imports nothing but pytest at import time; numpy, the
 comparison and OpenGL load inside the fixture, when a test asks for it.
 
-    from render.regression import render_case_frame
+    from orthosim_render.regression import render_case_frame
 
     def test_case1_last_step(orthosim_image_regression):
         orthosim_image_regression.check(render_case_frame("cases/case1_first_premolar_extraction.toml", view="frontal"))
@@ -73,7 +73,7 @@ class ImageRegression:
     def check(self, image, name: str | None = None, *, max_level: int = 3, max_fraction: float = 0.001) -> None:
         """Compare `image` with the golden `name` (default: the test's name); fail with the diff image's path.
 
-        `image`: a `render.regression.RenderedFrame` (its sidecar says what drew it), a (h, w, 3|4)
+        `image`: a `orthosim_render.regression.RenderedFrame` (its sidecar says what drew it), a (h, w, 3|4)
         uint8 array drawn in this process (this machine's GL is assumed), or a PNG path (its own
         sidecar if it has one, else this machine's GL). The mode (exact or within `max_level` levels
         on at most `max_fraction` of the pixels) comes from the sidecars, as for `orthosim imgdiff`.
@@ -81,8 +81,8 @@ class ImageRegression:
         __tracebackhide__ = True
         import numpy as np
 
-        from render import imgdiff
-        from render.regression import RenderedFrame, gl_identity
+        from orthosim_render import imgdiff
+        from orthosim_render.regression import RenderedFrame, gl_identity
 
         if isinstance(image, RenderedFrame):
             pixels, sidecar = image.image, image.sidecar
@@ -119,9 +119,9 @@ class ImageRegression:
                 warnings.warn(f"{golden}: {note}; regenerate it with pytest --orthosim-force-regen", stacklevel=2)
             return
         obtained = self._tmp_path / f"{golden.stem}.obtained.png"
-        from orthosim.atomic import write_bytes
+        from orthosim.storage.atomic import write_bytes
 
-        from render.png import encode_png
+        from orthosim_render.png import encode_png
 
         write_bytes(obtained, encode_png(np.ascontiguousarray(pixels)))
         diff = imgdiff.write_diff_image(self._tmp_path / f"{golden.stem}.diff.png", reference, pixels, comparison)
@@ -132,7 +132,7 @@ class ImageRegression:
         raise AssertionError(f"{message} (if the change is intended: pytest --orthosim-force-regen)")
 
     def _rewrite(self, golden: Path, pixels, sidecar, why: str) -> None:
-        from render import imgdiff
+        from orthosim_render import imgdiff
 
         imgdiff.write_golden(golden, pixels, sidecar)
         self._config.stash[_REWRITTEN].append(f"{golden} ({why}; sidecar {imgdiff.sidecar_path(golden).name})")

@@ -1,6 +1,6 @@
 """Renders for image regression tests: one simulation step of a case, in one view, at one size, as an array.
 
-    from render.regression import render_case_frame
+    from orthosim_render.regression import render_case_frame
     frame = render_case_frame("cases/case1_first_premolar_extraction.toml", step=-1, view="right_buccal")
     np.asarray(frame)   # (240, 320, 3) uint8; frame.sidecar says what drew it and what it shows
 
@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from orthosim import __version__
-from orthosim.runfolder import file_sha256
+from orthosim.runtime.runfolder import file_sha256
 
-from .imgdiff import GoldenSidecar
+from orthosim_render.imgdiff import GoldenSidecar
 
 DEFAULT_SIZE = (320, 240)
 
@@ -53,7 +53,7 @@ def mesa_version(gl_version: str) -> str | None:
 
 @functools.cache
 def _renderer(size: tuple[int, int]):
-    from .renderer import Renderer
+    from orthosim_render.renderer import Renderer
 
     return Renderer(size)
 
@@ -66,7 +66,7 @@ def gl_identity() -> GoldenSidecar:
 
 def this_machine_gl() -> GoldenSidecar | None:
     """`gl_identity()`, or None when no offscreen context can start here (the comparison then uses tolerance)."""
-    from .gl import RenderSetupError
+    from orthosim_render.gl import RenderSetupError
 
     try:
         return gl_identity()
@@ -76,8 +76,8 @@ def this_machine_gl() -> GoldenSidecar | None:
 
 def render_state(dentition, state, view: str = "frontal", size: tuple[int, int] = DEFAULT_SIZE, *,
                  hide_roots: bool = False, contact_faces: bool = False) -> np.ndarray:
-    """(h, w, 3) uint8: `state` (a `render.frame_state.FrameState`) of `dentition` from preset `view`."""
-    from .scene import DentitionScene
+    """(h, w, 3) uint8: `state` (a `orthosim_render.frame_state.FrameState`) of `dentition` from preset `view`."""
+    from orthosim_render.scene import DentitionScene
 
     scene = DentitionScene(dentition, size, hide_roots=hide_roots, color_contact_faces=contact_faces)
     scene.update(state)
@@ -90,13 +90,13 @@ class SimulatedCase:
 
     case_file: Path
     case_sha256: str
-    dentition: object  # orthosim.dentition.Dentition
+    dentition: object  # orthosim.model.dentition.Dentition
     extracted: frozenset[int]
     records: tuple  # orthosim.movement.simulation.StepRecord, one per step
 
     def state(self, step: int = -1, contacts: bool = True):
         """The `FrameState` drawn for `step` (negative counts from the end); contacts off drops the markers."""
-        from .frame_state import FrameState
+        from orthosim_render.frame_state import FrameState
 
         record = self.records[self._index(step)]
         state = FrameState.from_step(record, self.extracted)
@@ -116,7 +116,7 @@ class SimulatedCase:
 
 @functools.lru_cache(maxsize=4)
 def _simulated(case_file: Path, case_sha256: str, detector: str | None, steps: int | None) -> SimulatedCase:
-    from orthosim.case import load_case
+    from orthosim.exchange.case import load_case
     from orthosim.movement.simulation import MovementModel, simulate
 
     case = load_case(case_file)
@@ -145,14 +145,14 @@ def render_case_frame(case_file: str | Path, step: int = -1, view: str = "fronta
     The frame's sidecar names this machine's GL renderer and Mesa version, the size, view, case
     file name and SHA-256 and the step, as `orthosim imgdiff` and the pytest fixture expect.
     """
-    from .cameras import check_view
+    from orthosim_render.cameras import check_view
 
     view = check_view(view)
     # a step counted from the start needs only the steps up to it (never more than the case has);
     # from the end, the whole run
     steps = None
     if step >= 0:
-        from orthosim.case import load_case
+        from orthosim.exchange.case import load_case
 
         steps = min(step, load_case(case_file).steps)
     run = simulate_case_once(case_file, detector, steps)

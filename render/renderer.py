@@ -1,7 +1,7 @@
 """The renderer: owns the offscreen OSMesa OpenGL context and turns a `DentitionScene` into pixels.
 
 Drawing goes through a subclass of pyrender's `Renderer` (pyrender still owns meshes, buffers and
-the shader cache); each change below is measured by `orthosim bench` (render/bench.py,
+the shader cache); each change below is measured by `orthosim bench` (bench/render.py,
 `render_variants`):
   - our shaders (render/shaders/) instead of pyrender's physically based ones, with lighting
     evaluated per vertex;
@@ -25,7 +25,7 @@ import weakref
 
 import numpy as np
 
-from .gl import load_pyrender, osmesa_platform, shader_dir
+from orthosim_render.gl import load_pyrender, osmesa_platform, shader_dir
 
 
 def _lean_renderer_class(pyrender, GL):

@@ -21,14 +21,14 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from orthosim.dentition import Dentition
-from orthosim.fdi import Arch, arch_of
-from orthosim.tooth import CROWN, ROOT
+from orthosim.model.dentition import Dentition
+from orthosim.model.fdi import Arch, arch_of
+from orthosim.model.tooth import CROWN, ROOT
 
-from .cej import CejCut, cut_at_cej, vertex_blend
-from .cameras import VIEW_NAMES, CameraView, check_view, frame_view
-from .frame_state import FrameState
-from .gl import load_pyrender
+from orthosim_render.cej import CejCut, cut_at_cej, vertex_blend
+from orthosim_render.cameras import VIEW_NAMES, CameraView, check_view, frame_view
+from orthosim_render.frame_state import FrameState
+from orthosim_render.gl import load_pyrender
 
 # Colours, linear RGB in [0, 1]; chosen for clinicians: ivory enamel, roots clearly paler and
 # cooler than crowns, moving teeth a distinct mint, contacts a saturated red-magenta that no
@@ -69,7 +69,7 @@ def used_vertices(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.nd
 def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: bool, smooth_cej: bool = True):
     """Vertices duplicated along the CEJ so crown and root faces get their own colour.
 
-    smooth_cej: triangles straddling the CEJ plane are cut along it (`render.cej`), so the line is
+    smooth_cej: triangles straddling the CEJ plane are cut along it (`orthosim_render.cej`), so the line is
     smooth, not a staircase; `origin` says where each drawn face and vertex came from, so a
     picture that colours the model's faces or crown vertices still can.
 
@@ -220,7 +220,7 @@ class DentitionScene:
         """The preset `name`, framed from the rest-pose vertices of the arches it shows (cached)."""
         name = check_view(name)
         if name not in self._views:
-            from .cameras import PRESETS
+            from orthosim_render.cameras import PRESETS
 
             arches = PRESETS[name][2]
             if self._frame_points is not None:

@@ -13,12 +13,12 @@ from typing import Sequence
 
 import numpy as np
 
-from orthosim.dentition import Dentition
+from orthosim.model.dentition import Dentition
 from orthosim.errors import SphereTreeError
 from orthosim.spheretree.tree import SphereTree
 
-from .animation import tile
-from .frame_state import FrameState
+from orthosim_render.animation import tile
+from orthosim_render.frame_state import FrameState
 
 SPHERE_COLOR = (0.45, 0.66, 0.95)
 
@@ -28,10 +28,10 @@ def render_sphere_tree(tooth, tree: SphereTree, levels: Sequence[int] | None = N
     """(h, w * (1 + len(levels)), 3) uint8: the tooth, then its spheres at each of `levels`.
 
     The tooth is drawn in its local frame (crown up); `levels` default to every level below the
-    root. `renderer` may be an existing `render.renderer.Renderer` of the same size.
+    root. `renderer` may be an existing `orthosim_render.renderer.Renderer` of the same size.
     """
-    from .renderer import Renderer
-    from .scene import DentitionScene
+    from orthosim_render.renderer import Renderer
+    from orthosim_render.scene import DentitionScene
 
     levels = list(range(1, tree.depth)) if levels is None else list(levels)
     for k in levels:

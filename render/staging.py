@@ -16,7 +16,7 @@ import numpy as np
 
 from orthosim.staging.plan import path_pose
 
-from .frame_state import FrameState
+from orthosim_render.frame_state import FrameState
 
 IPR_MARKER_RADIUS_MM = 0.2  # contact points have no size; drawn as spheres of this radius
 
@@ -52,7 +52,7 @@ def staging_frames(run, frames_per_stage: int = 6) -> Iterator[FrameState]:
 def render_staging(run, out_dir: str | Path, views: Sequence[str] = ("frontal",), size=(640, 480),
                    frames_per_stage: int = 6, gif: bool = False, hide_roots: bool = False) -> dict:
     """Render the staging animation into out_dir (frames/NNNNN.png, animation.mp4, optional GIF)."""
-    from .animation import render_run
+    from orthosim_render.animation import render_run
 
     frames = list(staging_frames(run, frames_per_stage))
     record = render_run(run.dentition, frames, out_dir, views=views, size=size, gif=gif, hide_roots=hide_roots)

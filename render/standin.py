@@ -1,9 +1,9 @@
 """A stand-in dentition of simple tooth-shaped solids of revolution, for renderer tests and benchmarks.
 
 It has the shape of the real thing where the renderer cares: 28 (or 32) closed meshes of at least
-2,000 triangles each, crown and root faces labelled, in the arch frame of `orthosim.dentition`
+2,000 triangles each, crown and root faces labelled, in the arch frame of `orthosim.model.dentition`
 (upper crowns pointing down, lower crowns up, upper arch labial to the lower one, crowns meeting
-near the occlusal plane y = 0). It is not anatomy: use `orthosim.parametric` for that. The
+near the occlusal plane y = 0). It is not anatomy: use `orthosim.model.parametric` for that. The
 renderer uses it only when the parametric model cannot be built (see `default_dentition`).
 """
 
@@ -12,10 +12,10 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from orthosim.dentition import Dentition
-from orthosim.fdi import Arch, arch_of, position, side
-from orthosim.pose import frame_pose
-from orthosim.tooth import Tooth, part_of_faces
+from orthosim.model.dentition import Dentition
+from orthosim.model.fdi import Arch, arch_of, position, side
+from orthosim.geometry.pose import frame_pose
+from orthosim.model.tooth import Tooth, part_of_faces
 
 # Mesiodistal crown widths (mm) by position 1..8, rounded textbook values.
 _WIDTH = {Arch.UPPER: (8.5, 6.5, 7.5, 7.0, 6.5, 10.0, 9.0, 8.5), Arch.LOWER: (5.5, 6.0, 7.0, 7.0, 7.0, 11.0, 10.5, 10.0)}
@@ -111,7 +111,7 @@ def standin_dentition(third_molars: bool = False, segments: int = 48) -> Dentiti
 def default_dentition() -> tuple[Dentition, str]:
     """The parametric normal-occlusion model when it can be built, else the stand-in; with its name."""
     try:
-        from orthosim.parametric import parametric_dentition  # type: ignore[import-not-found]
+        from orthosim.model.parametric import parametric_dentition  # type: ignore[import-not-found]
     except ImportError:
         return standin_dentition(), "standin"
     return parametric_dentition(resolution="smooth", third_molars=False), "parametric-smooth"

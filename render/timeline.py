@@ -13,7 +13,7 @@ from typing import Iterable, Iterator
 
 from orthosim.geometry.motion import interpolate_pose
 
-from .frame_state import FrameState
+from orthosim_render.frame_state import FrameState
 
 
 def frames_from_steps(records: Iterable, extracted: frozenset[int] = frozenset(), per_step: int = 1) -> Iterator[FrameState]:

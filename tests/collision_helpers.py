@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from orthosim.shareddata import open_full_jaw_dir
+from orthosim.exchange.shareddata import open_full_jaw_dir
 from orthosim.spheretree.tree import SphereTree
 
 REAL_MAXILLA = open_full_jaw_dir("maxilla")

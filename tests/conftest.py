@@ -1,4 +1,4 @@
-"""Suite-wide: tests marked `real_data` read the Open-Full-Jaw teeth found by `orthosim.shareddata`.
+"""Suite-wide: tests marked `real_data` read the Open-Full-Jaw teeth found by `orthosim.exchange.shareddata`.
 
 They are skipped, with the folder named, when the data is absent, and the run's summary says how
 many of them ran and how many were skipped, so a clone without `../shared` cannot pass silently on
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from orthosim.shareddata import OPEN_FULL_JAW, shared_data_dir
+from orthosim.exchange.shareddata import OPEN_FULL_JAW, shared_data_dir
 
 _REAL_DATA = shared_data_dir() / OPEN_FULL_JAW
 _outcomes: dict[str, str] = {}

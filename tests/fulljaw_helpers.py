@@ -9,8 +9,8 @@ from __future__ import annotations
 import warnings
 from functools import lru_cache
 
-from orthosim.openfulljaw import load_open_full_jaw
-from orthosim.shareddata import open_full_jaw_dir
+from orthosim.exchange.openfulljaw import load_open_full_jaw
+from orthosim.exchange.shareddata import open_full_jaw_dir
 
 UPPER = [18, 17, 16, 15, 14, 13, 12, 11, 21, 22, 23, 24, 25, 26, 27]
 LOWER = [48, 47, 46, 45, 44, 43, 42, 41, 31, 32, 33, 34, 35, 36, 37, 38]

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from orthosim.case import Case, load_case
+from orthosim.exchange.case import Case, load_case
 
 
 def coarse_case(tmp_path, extractions, load: str, wire: str = "rectangular", days: float = 56, step: float = 7,

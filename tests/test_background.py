@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orthosim.background import ChildProcessIterator, fork_is_safe, in_child_process
-from orthosim.case import DEFAULT_CASE, load_case
+from orthosim.runtime.background import ChildProcessIterator, fork_is_safe, in_child_process
+from orthosim.exchange.case import DEFAULT_CASE, load_case
 from orthosim.geometry import meshquery
 from orthosim.errors import CaseError
 from orthosim.movement.simulation import MovementModel, simulate, simulate_case
@@ -164,7 +164,7 @@ def test_a_child_that_dies_is_reported_instead_of_waited_for():
 
 def test_remembered_exact_distances_are_fcls_own_answers():
     from orthosim.collision import CollisionModel, ExactQueries
-    from render.standin import standin_dentition
+    from orthosim_render.standin import standin_dentition
 
     dent = standin_dentition()
     model = CollisionModel.from_dentition(dent)
@@ -190,7 +190,7 @@ def test_ctrl_c_during_a_rendered_run_stops_it_in_one_line_and_leaves_no_process
                             cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 120
-        # the run writes into a staging folder beside `out` (orthosim.outputfolder)
+        # the run writes into a staging folder beside `out` (orthosim.runtime.outputfolder)
         while len(list(tmp_path.glob(".o.orthosim-staging-*/frames/*.png"))) < 3:
             assert proc.poll() is None and time.monotonic() < deadline, "the run ended before it could be interrupted"
             time.sleep(0.05)

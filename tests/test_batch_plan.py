@@ -9,7 +9,7 @@ import pytest
 
 from batch_helpers import SMALL_CASE
 from orthosim.batch import BatchError, parse_sweep, plan_batch
-from orthosim.case import CASES_DIR
+from orthosim.exchange.case import CASES_DIR
 
 
 @pytest.fixture

@@ -20,7 +20,7 @@ import pytest
 
 import batch_helpers as H
 from orthosim.batch import BatchOptions, parse_sweep, plan_batch, run_batch
-from orthosim.runfolder import read_finished_run
+from orthosim.runtime.runfolder import read_finished_run
 
 ROOT = Path(__file__).resolve().parent.parent
 FORCES = "loads.0.force_cN=100,150,200"
@@ -258,7 +258,7 @@ def test_the_batch_builds_each_models_trees_before_its_workers_start(case_file, 
 
 
 def test_the_bench_figure_runs_the_same_runs_on_a_cold_pool_of_one_and_of_two_workers(case_file):
-    from orthosim.batch.bench import batch_throughput
+    from orthosim_bench.batch import batch_throughput
 
     record = batch_throughput(H.instant, case_file, runs=6)
     assert record["runs"] == 6 and "6 runs" in record["batch_size_why"]

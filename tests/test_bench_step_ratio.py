@@ -1,4 +1,4 @@
-"""The bench's simulation step against the continuous detector, measured interleaved (render.bench)."""
+"""The bench's simulation step against the continuous detector, measured interleaved (orthosim_bench.render)."""
 
 import pytest
 
@@ -6,8 +6,8 @@ from collision_helpers import median_split_tree
 from movement_helpers import coarse_case
 from orthosim.collision import CollisionModel
 from orthosim.movement import MovementModel
-from orthosim.parametric import parametric_dentition
-from render.bench import _step_against_detector
+from orthosim.model.parametric import parametric_dentition
+from orthosim_bench.render import _step_against_detector
 
 
 def test_the_step_and_the_detector_are_timed_in_turn_and_compared(tmp_path):

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from orthosim.case import load_case
+from orthosim.exchange.case import load_case
 from orthosim.errors import CaseError
 
 CASES = Path(__file__).resolve().parent.parent / "cases"
@@ -176,14 +176,14 @@ def _sim_case(tmp_path, table: str):
 
 
 def test_simulation_parameters_default_to_the_documented_values(tmp_path):
-    from orthosim.case import load_case
+    from orthosim.exchange.case import load_case
 
     sim = load_case(_sim_case(tmp_path, "")).simulation
     assert (sim.force_share, sim.restitution, sim.resistance_rule, sim.resistance_fraction) == (0.5, 0.5, "literature", 0.4)
 
 
 def test_simulation_parameters_are_read(tmp_path):
-    from orthosim.case import load_case
+    from orthosim.exchange.case import load_case
 
     sim = load_case(_sim_case(tmp_path, "[simulation]\nforce_share = 0.3\nrestitution = 1.0\n"
                                         "resistance_rule = \"paper\"\nresistance_fraction = 0.5\n")).simulation
@@ -197,7 +197,7 @@ def test_simulation_parameters_are_read(tmp_path):
     ("resistance_fraction = 0.8", "simulation.resistance_fraction"),
 ])
 def test_bad_simulation_parameters_are_refused_naming_the_field(tmp_path, line, field):
-    from orthosim.case import load_case
+    from orthosim.exchange.case import load_case
     from orthosim.errors import CaseError
 
     with pytest.raises(CaseError, match=field.replace(".", r"\.")):

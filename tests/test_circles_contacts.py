@@ -3,9 +3,9 @@
 import numpy as np
 
 from orthosim.collision import CollisionModel, detect_step
-from orthosim.dentition import Dentition
-from orthosim.parametric import parametric_dentition
-from orthosim.pose import translation
+from orthosim.model.dentition import Dentition
+from orthosim.model.parametric import parametric_dentition
+from orthosim.geometry.pose import translation
 from orthosim.spheretree import cached_sphere_tree
 
 
@@ -33,7 +33,7 @@ def test_a_circles_contact_is_a_sphere_in_the_overlap_of_the_two_circles():
 
 
 def test_a_circles_simulation_records_contacts_for_its_touching_pairs():
-    from orthosim.case import load_case
+    from orthosim.exchange.case import load_case
     from orthosim.movement.simulation import MovementModel, simulate
 
     from pathlib import Path

@@ -29,7 +29,7 @@ def test_run_without_render_writes_metrics_of_the_initial_model(tmp_path):
     pairs = [d["pair"] for d in metrics["distances"]]
     assert [15, 13] in pairs and [23, 25] in pairs and [13, 14] not in pairs
     assert not list((tmp_path / "o").glob(".*"))  # no temporary files left behind
-    from orthosim.runfolder import read_finished_run
+    from orthosim.runtime.runfolder import read_finished_run
 
     assert read_finished_run(tmp_path / "o")["detector"] == "continuous"  # run.json marks it finished
 
@@ -60,7 +60,7 @@ def test_bad_size_option_is_refused():
 
 
 def test_outputs_get_ordinary_file_permissions(tmp_path):
-    from orthosim.atomic import write_json
+    from orthosim.storage.atomic import write_json
 
     target = tmp_path / "m.json"
     write_json(target, {"a": 1})

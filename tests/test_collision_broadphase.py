@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from orthosim.collision.broadphase import arch_neighbour_pairs, candidate_pairs, facing_pairs, sweep_and_prune
-from orthosim.fdi import ALL_FDI
+from orthosim.model.fdi import ALL_FDI
 
 ADULT_28 = [n for n in ALL_FDI if n % 10 != 8]
 

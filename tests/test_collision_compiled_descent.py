@@ -9,7 +9,7 @@ pytest.importorskip("numba")
 from collision_helpers import crown_like_mesh, median_split_tree  # noqa: E402
 from orthosim.collision import Body, CollisionModel  # noqa: E402
 from orthosim.collision import descent  # noqa: E402
-from orthosim.collision.bench import perturbed_poses  # noqa: E402
+from orthosim_bench.collision import perturbed_poses  # noqa: E402
 from orthosim.collision.continuous import swept_leaves  # noqa: E402
 from orthosim.collision.detect import default_pairs  # noqa: E402
 from orthosim.collision.discrete import overlapping_leaves  # noqa: E402
@@ -48,7 +48,7 @@ def mixed_depth_builder():
 
 @pytest.fixture(scope="module")
 def smooth():
-    from orthosim.parametric import parametric_dentition
+    from orthosim.model.parametric import parametric_dentition
 
     d = parametric_dentition("smooth")
     return d, CollisionModel.from_dentition(d)
@@ -56,7 +56,7 @@ def smooth():
 
 @pytest.fixture(scope="module", params=["median-split", "mixed-depth"])
 def coarse(request):
-    from orthosim.parametric import parametric_dentition
+    from orthosim.model.parametric import parametric_dentition
 
     d = parametric_dentition("coarse")
     builder = median_split_tree if request.param == "median-split" else mixed_depth_builder()

@@ -11,7 +11,7 @@ from orthosim.geometry import meshquery
 from orthosim.collision.circles import bounding_circles
 from orthosim.geometry.motion import interpolate_pose
 from orthosim.collision.validate import ToothSet, continuous_study, dense_first_contact, discrete_study, thin_root_mesh
-from orthosim.pose import rotation_about_axis, translation
+from orthosim.geometry.pose import rotation_about_axis, translation
 
 
 def octree_tree(mesh):
@@ -26,7 +26,7 @@ BUILDERS = {"median-split(test)": median_split_tree, "octree(project)": octree_t
 
 @pytest.fixture(scope="module")
 def parametric():
-    from orthosim.parametric import parametric_dentition
+    from orthosim.model.parametric import parametric_dentition
 
     d = parametric_dentition(resolution="coarse")
     return d, CollisionModel.from_dentition(d, tree_builder=median_split_tree)
@@ -246,7 +246,7 @@ def test_asking_for_an_unknown_detector_or_tooth_names_the_fix(parametric):
 
 
 def test_asking_for_the_first_contact_only_never_delays_the_time_of_first_contact(parametric):
-    from orthosim.collision.bench import perturbed_poses
+    from orthosim_bench.collision import perturbed_poses
 
     d, model = parametric
     start = {n: T for n, T in perturbed_poses(d.rest_poses(), step_mm=1.0, seed=7).items()}
@@ -289,7 +289,7 @@ def test_false_positive_bands_count_each_separated_pose_once_in_its_band():
 
 def test_times_only_give_the_same_pairs_and_times_without_drawn_leaves(parametric):
     from orthosim.collision import ExactQueries
-    from orthosim.collision.bench import perturbed_poses
+    from orthosim_bench.collision import perturbed_poses
 
     d, model = parametric
     start = perturbed_poses(d.rest_poses(), step_mm=1.0, seed=7)

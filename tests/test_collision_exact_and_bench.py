@@ -8,7 +8,7 @@ import trimesh
 from collision_helpers import median_split_tree
 from orthosim.collision import Body, CollisionModel, default_pairs, detect_step
 from orthosim.geometry.meshquery import penetration_depth
-from orthosim.pose import translation
+from orthosim.geometry.pose import translation
 
 
 def box_model(offset):
@@ -37,8 +37,8 @@ def test_bodies_that_are_not_an_arch_get_pairs_from_sweep_and_prune():
 
 
 def test_the_bench_record_times_every_detector_and_fcl_on_the_same_pairs():
-    from orthosim.collision.bench import collision_timings
-    from orthosim.parametric import parametric_dentition
+    from orthosim_bench.collision import collision_timings
+    from orthosim.model.parametric import parametric_dentition
 
     d = parametric_dentition(resolution="coarse")
     rec = collision_timings(d, repeats=1, tree_builder=median_split_tree)

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from orthosim.geometry.motion import chord_deviation_bound, interpolate_pose, rotation_angle
-from orthosim.pose import rotation_about_axis
+from orthosim.geometry.pose import rotation_about_axis
 
 
 def pose(R, p):

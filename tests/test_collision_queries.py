@@ -11,7 +11,7 @@ import trimesh
 from collision_helpers import median_split_tree
 from orthosim.collision import Body, CollisionModel, CollisionRequest, ExactQueries, contacts
 from orthosim.geometry import meshquery
-from orthosim.pose import translation
+from orthosim.geometry.pose import translation
 
 
 def boxes(offset_x: float):
@@ -112,7 +112,7 @@ def test_meshes_without_an_inside_get_the_vertex_depth():
 @pytest.mark.slow  # builds the 28 teeth from nothing (tens of seconds)
 def test_building_parametric_teeth_imports_neither_the_detectors_nor_numba(tmp_path):
     code = ("import sys\n"
-            "from orthosim.parametric import parametric_dentition\n"
+            "from orthosim.model.parametric import parametric_dentition\n"
             "assert len(parametric_dentition().teeth) == 28\n"
             "print(sorted(m for m in sys.modules if m.split('.')[0] == 'numba' or m.startswith('orthosim.collision')))\n")
     env = dict(os.environ, ORTHOSIM_CACHE=str(tmp_path))  # an empty cache: the teeth are really built

@@ -9,7 +9,7 @@ from orthosim.collision.continuous import refine_time_of_contact
 from orthosim.collision.model import Body, CollisionModel
 from orthosim.geometry.motion import relative_speed_bound
 from orthosim.geometry import meshquery
-from orthosim.pose import translation
+from orthosim.geometry.pose import translation
 
 
 def two_boxes():

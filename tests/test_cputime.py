@@ -1,4 +1,4 @@
-"""CPU per frame by thread and child process (`render.cputime`, the bench's end-to-end accounting)."""
+"""CPU per frame by thread and child process (`orthosim_render.cputime`, the bench's end-to-end accounting)."""
 
 import subprocess
 import sys
@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from render.cputime import cpu_ms_per_frame, cpu_snapshot
+from orthosim_render.cputime import cpu_ms_per_frame, cpu_snapshot
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 

@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from orthosim import fdi as F
-from orthosim.anatomy import dimensions
+from orthosim.model import fdi as F
+from orthosim.model.anatomy import dimensions
 from orthosim.geometry.meshquery import MeshQuery
-from orthosim.occlusion import bolton_ratios, mesiodistal_width, molar_relation, overbite, overjet
-from orthosim.parametric import parametric_dentition
-from orthosim.tooth import CROWN, ROOT
+from orthosim.analysis.occlusion import bolton_ratios, mesiodistal_width, molar_relation, overbite, overjet
+from orthosim.model.parametric import parametric_dentition
+from orthosim.model.tooth import CROWN, ROOT
 
 
 @pytest.fixture(scope="module")
@@ -142,7 +142,7 @@ def test_upper_arch_is_wider_than_the_lower_one_at_the_molars(dent):
 
 
 def test_diastema_opens_a_space_between_the_central_incisors():
-    from orthosim.metrics import tooth_to_tooth_distances
+    from orthosim.analysis.metrics import tooth_to_tooth_distances
 
     closed = parametric_dentition("coarse")
     opened = parametric_dentition("coarse", diastema_mm=2.0)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from orthosim.dentition import Dentition
-from orthosim.dentition_cache import DentitionCacheWarning, cached_dentition, entry_path, is_cached
-from orthosim.tooth import Tooth, part_of_faces
+from orthosim.model.dentition import Dentition
+from orthosim.model.dentition_cache import DentitionCacheWarning, cached_dentition, entry_path, is_cached
+from orthosim.model.tooth import Tooth, part_of_faces
 
 PARAMS = {"kind": "test", "size_mm": 8.0}
 
@@ -101,7 +101,7 @@ def test_two_processes_filling_one_entry_at_once_both_get_whole_teeth(tmp_path):
 
 
 def test_a_cases_diastema_is_part_of_its_cached_model_not_served_from_the_same_teeth_without_it(tmp_path, monkeypatch):
-    from orthosim.case import load_case
+    from orthosim.exchange.case import load_case
 
     monkeypatch.setenv("ORTHOSIM_CACHE", str(tmp_path / "cache"))
     teeth = tmp_path / "teeth"
@@ -132,7 +132,7 @@ def test_every_module_the_builders_import_is_part_of_the_cache_key():
 
     from pathlib import Path
 
-    from orthosim import dentition_cache
+    from orthosim.model import dentition_cache
 
     package = Path(dentition_cache.__file__).resolve().parent
     keyed = set(dentition_cache._BUILDER_MODULES)

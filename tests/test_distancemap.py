@@ -9,10 +9,10 @@ import pytest
 import trimesh
 
 from orthosim.geometry.meshquery import fcl_object, set_pose
-from orthosim.distancemap import CONTACT, FAR, NEAR, PENETRATION, DistanceMapModel, classify, summarize
-from orthosim.fdi import Arch, arch_of
-from orthosim.parametric import parametric_dentition
-from orthosim.pose import translation
+from orthosim.analysis.distancemap import CONTACT, FAR, NEAR, PENETRATION, DistanceMapModel, classify, summarize
+from orthosim.model.fdi import Arch, arch_of
+from orthosim.model.parametric import parametric_dentition
+from orthosim.geometry.pose import translation
 
 
 @pytest.fixture(scope="module")

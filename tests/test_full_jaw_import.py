@@ -12,15 +12,16 @@ import pytest
 import trimesh
 
 from fulljaw_helpers import LOWER, UPPER, full_jaw
-from orthosim import fdi as F
-from orthosim.case import load_case
+from orthosim.model import fdi as F
+from orthosim.exchange.case import load_case
 from orthosim.collision import candidate_pairs
 from orthosim.geometry import meshquery
 from orthosim.errors import CaseError
-from orthosim.meshload import ToothAxes, load_mesh_folder
-from orthosim.openfulljaw import AxesEstimatedWarning, estimated_axes, load_open_full_jaw
-from orthosim.pose import is_rigid
-from orthosim.shareddata import open_full_jaw_dir
+from orthosim.exchange.meshfolder import load_mesh_folder
+from orthosim.exchange.meshload import ToothAxes
+from orthosim.exchange.openfulljaw import AxesEstimatedWarning, estimated_axes, load_open_full_jaw
+from orthosim.geometry.pose import is_rigid
+from orthosim.exchange.shareddata import open_full_jaw_dir
 
 MAXILLA, MANDIBLE = open_full_jaw_dir("maxilla"), open_full_jaw_dir("mandible")
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from fulljaw_helpers import full_jaw
-from orthosim.case import Load, load_case
+from orthosim.exchange.case import Load, load_case
 from orthosim.collision import ExactQueries
 from orthosim.movement import MovementModel, simulate
 

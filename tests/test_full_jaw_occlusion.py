@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from fulljaw_helpers import full_jaw
-from orthosim.occlusalcontacts import occlusal_contacts, occlusion_record
+from orthosim.analysis.occlusalcontacts import occlusal_contacts, occlusion_record
 
 
 @lru_cache(maxsize=1)
@@ -45,8 +45,8 @@ def test_posterior_teeth_meet_on_both_sides_with_areas_of_square_millimetres_at_
 
 @pytest.mark.real_data
 def test_the_contact_areas_are_drawn_in_both_occlusal_views():
-    from render.occlusion_figure import FIGURE_VIEWS, render_occlusal_contacts
-    from render.scene import CONTACT_COLOR
+    from orthosim_render.occlusion_figure import FIGURE_VIEWS, render_occlusal_contacts
+    from orthosim_render.scene import CONTACT_COLOR
 
     dent, _ = full_jaw()
     images = render_occlusal_contacts(dent, _contacts(), size=(320, 240))

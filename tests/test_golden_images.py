@@ -1,6 +1,6 @@
 """orthosim's own golden images (tests/golden/): what a change to the drawing, the model or the cases does to a render.
 
-Each test renders through the public API (`render.regression`) and checks the image with the
+Each test renders through the public API (`orthosim_render.regression`) and checks the image with the
 `orthosim_image_regression` fixture, as a user's test would: exact on the machine and Mesa build
 the goldens were made with, within tolerance elsewhere. Frames are named by simulation step (a
 paper case's last step), never by animation frame, and carry no text overlay.
@@ -21,8 +21,8 @@ from pathlib import Path
 
 import pytest
 
-from render.cameras import VIEW_NAMES
-from render.regression import render_case_frame
+from orthosim_render.cameras import VIEW_NAMES
+from orthosim_render.regression import render_case_frame
 
 ROOT = Path(__file__).resolve().parent.parent
 CASES = ROOT / "cases"
@@ -58,9 +58,9 @@ def test_paper_case_last_step_with_contacts_matches_its_golden(orthosim_image_re
 
 def test_sphere_tree_levels_of_a_first_molar_match_their_golden(orthosim_image_regression):
     """Figure 2: tooth 16, then its spheres at every level below the root, side by side."""
-    from orthosim.case import load_case
+    from orthosim.exchange.case import load_case
     from orthosim.spheretree import cached_sphere_tree
-    from render.spheretree_view import render_sphere_tree
+    from orthosim_render.spheretree_view import render_sphere_tree
 
     tooth = load_case(CASES / "normal_occlusion.toml").build_dentition().teeth[16]
     tree = cached_sphere_tree(tooth.mesh)
@@ -72,12 +72,12 @@ def test_sphere_tree_levels_of_a_first_molar_match_their_golden(orthosim_image_r
 def test_distance_map_of_case1_before_treatment_matches_its_golden(orthosim_image_regression):
     """The report's inter-arch distance map (an occlusal map): every upper crown vertex coloured by
     its exact distance to the lower arch, case 1 at rest, seen from below (maxillary occlusal)."""
-    from orthosim.case import load_case
-    from orthosim.distancemap import DistanceMapModel
-    from render.frame_state import FrameState
-    from render.regression import _renderer
-    from render.report.pictures import distance_colors
-    from render.scene import DentitionScene, paint_crowns
+    from orthosim.exchange.case import load_case
+    from orthosim.analysis.distancemap import DistanceMapModel
+    from orthosim_render.frame_state import FrameState
+    from orthosim_render.regression import _renderer
+    from orthosim_render.report.pictures import distance_colors
+    from orthosim_render.scene import DentitionScene, paint_crowns
 
     case = load_case(CASES / "case1_first_premolar_extraction.toml")
     dent = case.build_dentition()

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from render.imgdiff import (DIFF_COLOUR, GoldenSidecar, Tolerance, compare_images, diff_image, read_png,
+from orthosim_render.imgdiff import (DIFF_COLOUR, GoldenSidecar, Tolerance, compare_images, diff_image, read_png,
                             read_sidecar, sidecar_path, write_golden)
-from render.png import encode_png
+from orthosim_render.png import encode_png
 from cli_helpers import orthosim
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -43,7 +43,7 @@ def copy_golden(src: Path, dst: Path, sidecar: GoldenSidecar | None = None) -> P
 
 
 def test_an_unchanged_render_passes_its_golden_exactly(tmp_path):
-    from render.regression import render_case_frame
+    from orthosim_render.regression import render_case_frame
 
     frame = render_case_frame(CASES / "normal_occlusion.toml", step=0, view="frontal")
     candidate = tmp_path / "frontal.png"
@@ -56,7 +56,7 @@ def test_an_unchanged_render_passes_its_golden_exactly(tmp_path):
 
 
 def test_a_tooth_moved_by_0_2_mm_is_caught_exactly_and_within_tolerance():
-    from render.regression import render_state, simulate_case_once
+    from orthosim_render.regression import render_state, simulate_case_once
 
     run = simulate_case_once(CASES / "normal_occlusion.toml", steps=0)
     state = run.state(0)
@@ -75,7 +75,7 @@ def test_a_tooth_moved_by_0_2_mm_is_caught_exactly_and_within_tolerance():
 
 def test_one_missing_contact_marker_is_caught(tmp_path):
     """Case 3's last step drawn with one contact sphere left out: the one nearest the frontal camera."""
-    from render.regression import render_state, simulate_case_once
+    from orthosim_render.regression import render_state, simulate_case_once
 
     run = simulate_case_once(CASES / "case3_incisor_space_closure.toml")
     state = run.state(-1)
@@ -100,7 +100,7 @@ def test_one_missing_contact_marker_is_caught(tmp_path):
 
 
 def run_view_projection(run, view: str, point) -> tuple[int, int]:
-    from render.scene import DentitionScene
+    from orthosim_render.scene import DentitionScene
 
     scene = DentitionScene(run.dentition, (320, 240))
     col, row = scene.view(view).project(np.asarray(point, float)[None], (320, 240))[0]

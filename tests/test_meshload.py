@@ -11,12 +11,13 @@ import pytest
 import trimesh
 
 from orthosim.errors import MeshError
-from orthosim.fdi import Arch
-from orthosim.meshload import (DEFAULT_MAX_TRIANGLES, MeshRepairWarning, MeshSimplifiedWarning, ToothAxes,
-                               load_mesh_folder, load_tooth_mesh)
-from orthosim.openfulljaw import load_open_full_jaw
-from orthosim.pose import is_rigid
-from orthosim.shareddata import open_full_jaw_dir
+from orthosim.model.fdi import Arch
+from orthosim.exchange.meshload import (DEFAULT_MAX_TRIANGLES, MeshRepairWarning, MeshSimplifiedWarning, ToothAxes,
+                               load_tooth_mesh)
+from orthosim.exchange.meshfolder import load_mesh_folder
+from orthosim.exchange.openfulljaw import load_open_full_jaw
+from orthosim.geometry.pose import is_rigid
+from orthosim.exchange.shareddata import open_full_jaw_dir
 
 MAXILLA = open_full_jaw_dir("maxilla")
 UPPER_PRESENT = [18, 17, 16, 15, 14, 13, 12, 11, 21, 22, 23, 24, 25, 26, 27]  # Universal 1-15; 28 absent
@@ -396,9 +397,9 @@ def _molar(subdivisions: int) -> tuple[trimesh.Trimesh, trimesh.Trimesh]:
     Loop subdivision smooths as it refines, as a scanner's dense surface is; the subdivided mesh
     is the reference surface the simplified one is measured against.
     """
-    from orthosim.anatomy import dimensions
-    from orthosim.fdi import tooth_type
-    from orthosim.toothshape import build_tooth_shape
+    from orthosim.model.anatomy import dimensions
+    from orthosim.model.fdi import tooth_type
+    from orthosim.model.toothshape import build_tooth_shape
 
     tooth = build_tooth_shape(dimensions(16), Arch.UPPER, tooth_type(16), "smooth").mesh
     v, f = trimesh.remesh.subdivide_loop(tooth.vertices, tooth.faces, iterations=subdivisions)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from orthosim.meshrefine import split_long_edges
-from orthosim.parametric import parametric_dentition
+from orthosim.geometry.meshrefine import split_long_edges
+from orthosim.model.parametric import parametric_dentition
 
 
 def _check_same_surface(before: trimesh.Trimesh, v: np.ndarray, f: np.ndarray, max_edge: float) -> trimesh.Trimesh:

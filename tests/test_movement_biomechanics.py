@@ -7,7 +7,7 @@ import pytest
 from orthosim.errors import CaseError
 from orthosim.movement.biomechanics import RateLaw, build_mechanics, movement_type, tooth_motion
 from orthosim.movement.resistance import center_of_resistance, tipping_center
-from orthosim.parametric import parametric_dentition
+from orthosim.model.parametric import parametric_dentition
 
 LAW = RateLaw()
 MONTH = 30.0

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from collision_helpers import median_split_tree
-from orthosim.case import load_case
+from orthosim.exchange.case import load_case
 from orthosim.collision import CollisionModel
-from orthosim.metrics import tooth_to_tooth_distances
+from orthosim.analysis.metrics import tooth_to_tooth_distances
 from orthosim.movement import MovementModel, simulate
 from orthosim.movement.report import RunReport, read_steps
-from orthosim.parametric import parametric_dentition
+from orthosim.model.parametric import parametric_dentition
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ from orthosim.movement import MovementModel, simulate
 from orthosim.movement.biomechanics import Motion
 from orthosim.movement.simulation import (Detection, Hit, StepState, contacts_at, detection, forces, initial_state,
                                           motions, response, step)
-from orthosim.parametric import parametric_dentition
+from orthosim.model.parametric import parametric_dentition
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ from orthosim.errors import CaseError
 from orthosim.movement import MovementModel, simulate
 from orthosim.movement.biomechanics import RateLaw
 from orthosim.movement.resistance import tipping_center
-from orthosim.parametric import parametric_dentition
+from orthosim.model.parametric import parametric_dentition
 
 
 @pytest.fixture(scope="module")

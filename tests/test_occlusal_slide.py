@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orthosim.case import Load, load_case
-from orthosim.dentition import Dentition
-from orthosim.interpenetration import SLIDE_MAX_MM, SLIDE_MIN_MM, default_occlusal_slide_mm
+from orthosim.exchange.case import Load, load_case
+from orthosim.model.dentition import Dentition
+from orthosim.collision.interpenetration import SLIDE_MAX_MM, SLIDE_MIN_MM, default_occlusal_slide_mm
 from orthosim.collision import ExactQueries
 from orthosim.movement import MovementModel, simulate
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from orthosim.outputfolder import OutputFolderError, output_folder
+from orthosim.runtime.outputfolder import OutputFolderError, output_folder
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -83,7 +83,7 @@ def test_a_second_run_into_the_same_folder_is_refused_while_the_first_holds_it(t
     out = tmp_path / "out"
     holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
         import sys
-        from orthosim.outputfolder import output_folder
+        from orthosim.runtime.outputfolder import output_folder
         with output_folder({str(out)!r}) as staging:
             print("holding", flush=True)
             sys.stdin.readline()
@@ -172,7 +172,7 @@ def test_a_full_disk_is_one_line_and_leaves_the_earlier_run_as_it_was(tiny_disk)
 
 def test_a_case_file_kept_in_its_run_folder_is_carried_into_the_new_run(tmp_path):
     """`orthosim batch` writes each variant's case.toml into its run folder, then runs it there."""
-    from orthosim.outputfolder import output_folder
+    from orthosim.runtime.outputfolder import output_folder
 
     target = tmp_path / "run"
     target.mkdir()

@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from orthosim.parametric import parametric_dentition
-from render.cameras import frame_view
-from render.frame_state import FrameState
-from render.overlay import FrameCaption, FrameOverlay, blend, text_patch
+from orthosim.model.parametric import parametric_dentition
+from orthosim_render.cameras import frame_view
+from orthosim_render.frame_state import FrameState
+from orthosim_render.overlay import FrameCaption, FrameOverlay, blend, text_patch
 
 
 @pytest.fixture(scope="module")

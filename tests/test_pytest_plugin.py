@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from render.imgdiff import read_png, read_sidecar, sidecar_path
+from orthosim_render.imgdiff import read_png, read_sidecar, sidecar_path
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -28,7 +28,7 @@ def pytest_in(project: Path, *args, cwd: Path | None = None):
 
 
 def test_loading_the_plugin_imports_no_opengl_numpy_or_numba():
-    code = ("import sys, render.pytest_plugin; "
+    code = ("import sys, orthosim_render.pytest_plugin; "
             "print(sorted(m for m in ('OpenGL', 'pyrender', 'numba', 'numpy', 'skimage', 'trimesh', 'PIL') if m in sys.modules))")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
@@ -39,7 +39,7 @@ def test_the_plugin_is_registered_for_every_pytest_run():
     from importlib.metadata import entry_points
 
     (ep,) = [e for e in entry_points(group="pytest11") if e.name == "orthosim"]
-    assert ep.value == "render.pytest_plugin"
+    assert ep.value == "orthosim_render.pytest_plugin"
 
 
 def test_it_works_beside_a_plugin_with_pytest_regressions_names(tmp_path):
@@ -70,7 +70,7 @@ def test_it_works_beside_a_plugin_with_pytest_regressions_names(tmp_path):
 USER_TEST = """
 import json
 import numpy as np
-from render.png import encode_png
+from orthosim_render.png import encode_png
 
 def test_plate(orthosim_image_regression, tmp_path):
     im = np.zeros((60, 80, 3), np.uint8)

@@ -11,9 +11,9 @@ import pytest
 import trimesh
 
 from cli_helpers import orthosim
-from orthosim.case import load_case
+from orthosim.exchange.case import load_case
 from orthosim.errors import CaseError
-from orthosim.meshload import MeshSimplifiedWarning
+from orthosim.exchange.meshload import MeshSimplifiedWarning
 
 TEETH = (12, 11, 21, 22)
 
@@ -21,7 +21,7 @@ TEETH = (12, 11, 21, 22)
 def _mesh_case(folder: Path, budget_line: str = "", dense: int = 11) -> Path:
     """A `meshes` case of four upper incisors in the arch frame (the parametric model's), tooth `dense`
     loop-subdivided twice (x16 triangles, the same tooth smoothed as a dense scan is)."""
-    from orthosim.parametric import parametric_dentition
+    from orthosim.model.parametric import parametric_dentition
 
     model = parametric_dentition("smooth")
     teeth = folder / "teeth"

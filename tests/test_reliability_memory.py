@@ -1,4 +1,4 @@
-"""Peak memory of long runs (`orthosim.memorybench`): measured on a fresh child process tree, the
+"""Peak memory of long runs (`orthosim_bench.memory`): measured on a fresh child process tree, the
 measuring process's own memory never counted, every process of the run's tree counted."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import textwrap
 
 import pytest
 
-from orthosim.case import DEFAULT_CASE
-from orthosim.memorybench import TARGET_MB, measure_peak_memory, memory_timings
+from orthosim.exchange.case import DEFAULT_CASE
+from orthosim_bench.memory import TARGET_MB, measure_peak_memory, memory_timings
 
 MB = 2 ** 20
 

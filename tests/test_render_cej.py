@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from orthosim.tooth import CROWN, ROOT, part_of_faces
-from render.cej import cut_at_cej, split_at_cej, vertex_blend
+from orthosim.model.tooth import CROWN, ROOT, part_of_faces
+from orthosim_render.cej import cut_at_cej, split_at_cej, vertex_blend
 
 
 def _ball():
@@ -69,8 +69,8 @@ def test_a_value_given_on_the_crowns_vertices_is_carried_linearly_onto_the_cut()
 
 
 def _ball_dentition():
-    from orthosim.dentition import Dentition
-    from orthosim.tooth import Tooth
+    from orthosim.model.dentition import Dentition
+    from orthosim.model.tooth import Tooth
 
     mesh = _ball()
     tooth = Tooth(11, mesh, part_of_faces(mesh), np.array([0.0, 4.0, 0.0]), np.array([0.0, -4.0, 0.0]), np.eye(4), {})
@@ -78,7 +78,7 @@ def _ball_dentition():
 
 
 def test_a_crown_painted_per_model_vertex_is_drawn_on_the_cut_mesh_with_those_colours():
-    from render.scene import DentitionScene, paint_crowns
+    from orthosim_render.scene import DentitionScene, paint_crowns
 
     dent = _ball_dentition()
     scene = DentitionScene(dent, (64, 48), hide_roots=True, show_markers=False)
@@ -97,7 +97,7 @@ def test_a_crown_painted_per_model_vertex_is_drawn_on_the_cut_mesh_with_those_co
 
 
 def test_exact_contact_faces_colour_the_pieces_of_the_cut_faces_they_name():
-    from render.scene import DentitionScene
+    from orthosim_render.scene import DentitionScene
 
     dent = _ball_dentition()
     scene = DentitionScene(dent, (64, 48), hide_roots=False, show_markers=False, exact_contact_faces=True)

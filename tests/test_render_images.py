@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from render.cameras import VIEW_NAMES
-from render.frame_state import FrameState
-from render.renderer import Renderer
-from render.scene import BACKGROUND, DentitionScene
+from orthosim_render.cameras import VIEW_NAMES
+from orthosim_render.frame_state import FrameState
+from orthosim_render.renderer import Renderer
+from orthosim_render.scene import BACKGROUND, DentitionScene
 
 ROOT = Path(__file__).resolve().parent.parent
 SIZE = (320, 240)
@@ -24,7 +24,7 @@ BG = np.round(np.array(BACKGROUND) * 255)
 
 @pytest.fixture(scope="module")
 def dentition():
-    from orthosim.case import load_case
+    from orthosim.exchange.case import load_case
 
     return load_case(ROOT / "cases" / "normal_occlusion.toml").build_dentition()
 
@@ -175,7 +175,7 @@ def test_faces_inside_contact_spheres_are_coloured(dentition):
 
 
 def scene_contact_colour():
-    from render.scene import CONTACT_COLOR
+    from orthosim_render.scene import CONTACT_COLOR
 
     return np.array(CONTACT_COLOR, np.float32)
 
@@ -213,7 +213,7 @@ def test_shader_programs_are_compiled_once_not_per_frame(renderer, dentition):
 
 def test_static_image_cache_changes_speed_not_pixels(dentition):
     """Teeth that do not move are drawn once and reused; frames must equal a full redraw."""
-    from render.bench import SyntheticMotion
+    from orthosim_bench.render import SyntheticMotion
 
     motion = SyntheticMotion(dentition, n_markers=200, period=8)
     with Renderer(SIZE) as cached, Renderer(SIZE, static_cache=False) as plain:
@@ -239,7 +239,7 @@ def test_static_image_cache_changes_speed_not_pixels(dentition):
 def test_a_contact_sphere_listed_several_times_is_drawn_once_with_the_same_pixels(renderer, dentition):
     """The simulation lists a leaf sphere once per overlapping leaf of the other tooth; the scene
     draws each sphere once, and the frame must equal the one drawing every listing."""
-    from render.bench import SyntheticMotion
+    from orthosim_bench.render import SyntheticMotion
 
     rng = np.random.default_rng(3)
     for i, view in enumerate(("frontal", "right_buccal", "maxillary")):

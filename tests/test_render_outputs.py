@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from orthosim.errors import OrthosimError
-from render.animation import render_run, tile
-from render.bench import SyntheticMotion, run_bench
-from render.cameras import check_view, frame_view
-from render.frame_state import FrameState
-from render.standin import standin_dentition
+from orthosim_render.animation import render_run, tile
+from orthosim_bench.render import SyntheticMotion, run_bench
+from orthosim_render.cameras import check_view, frame_view
+from orthosim_render.frame_state import FrameState
+from orthosim_render.standin import standin_dentition
 
 
 @pytest.fixture(scope="module")
@@ -84,8 +84,8 @@ def test_bench_record_follows_the_output_contract(tmp_path, dentition):
     record = run_bench(dentition=dentition, frames=6, warmup=2, memory_frames=4, variant_rounds=1,
                        size=(160, 120), n_markers=100, tree_build=False, staging=False)
     json.dumps(record)  # serialisable as is
-    assert record["staging_s"] is None  # switched off here; orthosim.staging.bench is tested on its own
-    assert record["spheretree_build"] is None  # switched off here; orthosim.spheretree.bench is tested on its own
+    assert record["staging_s"] is None  # switched off here; orthosim_bench.staging is tested on its own
+    assert record["spheretree_build"] is None  # switched off here; orthosim_bench.spheretree is tested on its own
     assert record["machine"]["cores"] >= 1 and record["machine"]["gl_renderer"]
     assert record["target_fps"] == 40
     fps = record["fps"]
@@ -116,7 +116,7 @@ def test_synthetic_motion_moves_only_the_moving_teeth(dentition):
 
 
 def test_prefetch_keeps_order_and_surfaces_producer_errors():
-    from render.animation import prefetch
+    from orthosim_render.animation import prefetch
 
     assert list(prefetch(iter(range(50)))) == list(range(50))
 
@@ -151,16 +151,16 @@ def test_render_run_reports_each_frame_to_its_caller_and_the_bench_times_render_
                on_frame=lambda st, sc: seen.append((st, len(sc.markers.positions))))
     assert [s for s, _ in seen] == states and all(n > 0 for _, n in seen)
 
-    import render.animation
+    import orthosim_render.animation
 
     calls = []
-    real = render.animation.render_run
+    real = orthosim_render.animation.render_run
 
     def counted(*args, **kwargs):
         calls.append(kwargs.get("caption"))
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(render.animation, "render_run", counted)
+    monkeypatch.setattr(orthosim_render.animation, "render_run", counted)
     record = run_bench(dentition=dentition, frames=3, warmup=1, memory_frames=2, variant_rounds=1, size=(160, 120),
                        n_markers=30, tree_build=False, staging=False, startup=False, png=False)
     assert calls == [None]  # end_to_end (synthetic here) is render_run's own loop
@@ -168,7 +168,7 @@ def test_render_run_reports_each_frame_to_its_caller_and_the_bench_times_render_
 
 
 def test_used_vertices_is_numpys_unique_with_its_inverse():
-    from render.scene import used_vertices
+    from orthosim_render.scene import used_vertices
 
     rng = np.random.default_rng(7)
     for n, m in ((1, 1), (10, 4), (500, 300), (2000, 50)):

@@ -5,8 +5,8 @@ import pytest
 
 from orthosim.errors import OrthosimError
 from orthosim.spheretree.tree import SphereTree
-from render.spheretree_view import SPHERE_COLOR, render_sphere_tree
-from render.standin import standin_dentition
+from orthosim_render.spheretree_view import SPHERE_COLOR, render_sphere_tree
+from orthosim_render.standin import standin_dentition
 
 
 def two_level_tree(tooth) -> SphereTree:

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from orthosim.geometry.motion import interpolate_pose
-from orthosim.pose import rotation_about_axis
-from render.timeline import frames_from_steps
+from orthosim.geometry.pose import rotation_about_axis
+from orthosim_render.timeline import frames_from_steps
 
 
 def record(step, poses, moving):

@@ -62,7 +62,7 @@ def orthosim(*args, cwd=ROOT):
 
 
 def chromium_required():
-    from render.report.browser import NAMES
+    from orthosim_render.report.browser import NAMES
 
     if not any(shutil.which(n) for n in NAMES):
         pytest.fail("headless Chromium is not installed: run `bash tools/dev.sh install` (it installs Debian's chromium)")
@@ -118,7 +118,7 @@ def test_report_json_figures_equal_the_metrics_of_the_runs(report):
 def test_the_page_loads_offline_in_chromium_with_every_picture_and_no_console_error(report_dir, report):
     from PIL import Image
 
-    from render.report.browser import load_page
+    from orthosim_render.report.browser import load_page
 
     page = load_page(report_dir / "index.html")
     assert page.problems == []
@@ -134,7 +134,7 @@ def test_the_page_loads_offline_in_chromium_with_every_picture_and_no_console_er
 
 
 def test_the_page_check_catches_a_console_error_and_a_missing_picture(tmp_path):
-    from render.report.browser import load_page
+    from orthosim_render.report.browser import load_page
 
     chromium_required()
     (tmp_path / "bad.html").write_text('<!DOCTYPE html><html><body><img src="img/missing.png" alt="x">'

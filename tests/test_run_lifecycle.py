@@ -78,7 +78,7 @@ def _start_rendered_run(case: Path, out: Path) -> subprocess.Popen:
 
 def _wait_for_frames(proc: subprocess.Popen, parent: Path, n: int = 3) -> None:
     deadline = time.monotonic() + 300
-    def drawn():  # into a staging folder beside the output (orthosim.outputfolder); before it, into the output
+    def drawn():  # into a staging folder beside the output (orthosim.runtime.outputfolder); before it, into the output
         return len([*parent.glob(".*.orthosim-staging-*/frames/*.png"), *parent.glob("*/frames/*.png")])
 
     n += drawn()  # an earlier run's frames

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from orthosim import __version__
-from orthosim.runfolder import RUN_FILE, RunFolderError, read_finished_run, write_run_record
+from orthosim.runtime.runfolder import RUN_FILE, RunFolderError, read_finished_run, write_run_record
 
 
 @pytest.fixture()

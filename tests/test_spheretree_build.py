@@ -13,16 +13,16 @@ import trimesh
 
 from orthosim.errors import SphereTreeError
 from orthosim.spheretree import build_sphere_tree
-from orthosim.shareddata import open_full_jaw_dir
+from orthosim.exchange.shareddata import open_full_jaw_dir
 from orthosim.spheretree.measure import count_holding, surface_samples
 
 REAL_MOLAR = open_full_jaw_dir("maxilla") / "tooth_3.stl"
 
 
 def parametric_tooth(fdi: int = 36, resolution: str = "medium") -> trimesh.Trimesh:
-    from orthosim.anatomy import dimensions
-    from orthosim.fdi import arch_of, tooth_type
-    from orthosim.toothshape import build_tooth_shape
+    from orthosim.model.anatomy import dimensions
+    from orthosim.model.fdi import arch_of, tooth_type
+    from orthosim.model.toothshape import build_tooth_shape
 
     return build_tooth_shape(dimensions(fdi), arch_of(fdi), tooth_type(fdi), resolution).mesh
 

@@ -201,8 +201,8 @@ def test_many_trees_at_once_build_in_parallel_each_distinct_mesh_once(tmp_path):
 
 
 def test_tree_build_timings_build_each_mirror_pair_once():
-    from orthosim.parametric import parametric_dentition
-    from orthosim.spheretree.bench import tree_build_timings
+    from orthosim.model.parametric import parametric_dentition
+    from orthosim_bench.spheretree import tree_build_timings
 
     rec = tree_build_timings(parametric_dentition("coarse"), baseline=False)
     assert rec["teeth"] == 28 and rec["distinct_meshes"] == 14  # left and right teeth are mirror images

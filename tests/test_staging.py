@@ -12,11 +12,11 @@ import sys
 import numpy as np
 import pytest
 
-from orthosim.case import CASES_DIR, load_case
+from orthosim.exchange.case import CASES_DIR, load_case
 from orthosim.geometry import meshquery
 from orthosim.geometry.motion import interpolate_pose
 from orthosim.errors import CaseError, OrthosimError
-from orthosim.parametric import parametric_dentition
+from orthosim.model.parametric import parametric_dentition
 from orthosim.staging.commands import plan_case
 from orthosim.staging.limits import StageLimits
 from orthosim.staging.plan import plan_staging
@@ -208,7 +208,7 @@ def test_stage_command_refuses_a_case_without_target_in_one_line(tmp_path):
 
 
 def test_the_bench_setup_moves_all_28_teeth_with_a_lower_bound_of_30(dent):
-    from orthosim.staging.bench import big_setup
+    from orthosim_bench.staging import big_setup
     from orthosim.staging.plan import stage_counts
 
     start, target = big_setup(dent)

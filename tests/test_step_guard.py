@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orthosim.case import load_case
+from orthosim.exchange.case import load_case
 from orthosim.collision import DETECTORS
 from orthosim.movement import MovementModel, simulate
 

@@ -40,7 +40,7 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ tools/overrides.txt
 fi
 # our own sources are an editable install, which uv does not compile: without their .pyc files every
 # process compiles orthosim and render again (0.19 s of CPU per process, measured); up-to-date files are skipped
-.venv/bin/python -m compileall -q orthosim render >/dev/null
+.venv/bin/python -m compileall -q orthosim render bench >/dev/null
 
 export PYOPENGL_PLATFORM=osmesa
 case "$action" in

@@ -7,8 +7,8 @@ batch.csv rows, `bench` the animations-per-minute figure. None of it draws: the 
 one case (`orthosim.cli.run_case`, which renders) is handed in by the composition root.
 """
 
-from .execute import BatchOptions, run_batch
-from .plan import BatchError, Sweep, Variant, parse_sweep, plan_batch
-from .table import RunRow
+from orthosim.batch.execute import BatchOptions, run_batch
+from orthosim.batch.plan import BatchError, Sweep, Variant, parse_sweep, plan_batch
+from orthosim.batch.table import RunRow
 
 __all__ = ["BatchError", "BatchOptions", "RunRow", "Sweep", "Variant", "parse_sweep", "plan_batch", "run_batch"]

@@ -20,10 +20,10 @@ import uuid
 from pathlib import Path
 from typing import Iterator, Sequence
 
-from ..atomic import write_bytes
-from ..runfolder import RUN_FILE
-from .plan import BatchError, Variant
-from .worker import RunCase, RunOutcome, execute_shipped
+from orthosim.storage.atomic import write_bytes
+from orthosim.runtime.runfolder import RUN_FILE
+from orthosim.batch.plan import BatchError, Variant
+from orthosim.batch.worker import RunCase, RunOutcome, execute_shipped
 
 _POLL_S = 0.5
 

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import click
 
-from ..cli import check_render_options, render_options, run_case
-from ..detectors import DETECTORS
-from .execute import BatchOptions, counts, run_batch
-from .plan import parse_sweep, plan_batch
-from .worker import ONE_CORE
+from orthosim.cli import check_render_options, render_options, run_case
+from orthosim.collision.detectors import DETECTORS
+from orthosim.batch.execute import BatchOptions, counts, run_batch
+from orthosim.batch.plan import parse_sweep, plan_batch
+from orthosim.batch.worker import ONE_CORE
 
 
 @click.command()

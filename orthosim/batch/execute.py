@@ -3,7 +3,7 @@
     rows = run_batch(variants, Path("out/sweep"), run_case, BatchOptions(workers=2))
 
 `DIR/<run-id>/` is a run folder as `orthosim run` leaves it, plus `case.toml`, the exact case that
-ran. A run counts as done when `orthosim.runfolder.read_finished_run` accepts its folder and its
+ran. A run counts as done when `orthosim.runtime.runfolder.read_finished_run` accepts its folder and its
 run.json names this variant's case text and detector; the same command after an interruption
 (Ctrl-C, a killed worker, a full disk) reuses those and runs the others again from a cleared
 folder. One batch at a time writes into a folder (a lock). The sphere trees the runs need are
@@ -23,10 +23,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator, Sequence
 
-from ..atomic import write_text
-from .plan import BatchError, Variant
-from .table import FAILED, OK, RunRow, finished_summary, write_table
-from .worker import RunCase, RunOutcome, RunTask
+from orthosim.storage.atomic import write_text
+from orthosim.batch.plan import BatchError, Variant
+from orthosim.batch.table import FAILED, OK, RunRow, finished_summary, write_table
+from orthosim.batch.worker import RunCase, RunOutcome, RunTask
 
 LOCK_FILE = ".batch.lock"
 TABLE_EVERY_S = 2.0  # batch.json/csv rewritten at most this often while runs end (and always at the end)
@@ -92,8 +92,8 @@ def prepare_run_dir(run_dir: Path, variant: Variant) -> Path:
 
 def prebuild_trees(case_files: Sequence[Path]) -> None:
     """Load or build, once each, the sphere trees of these cases' models (one case per distinct model)."""
-    from ..case import load_case
-    from ..collision import CollisionModel
+    from orthosim.exchange.case import load_case
+    from orthosim.collision import CollisionModel
 
     for path in case_files:
         CollisionModel.from_dentition(load_case(path).build_dentition())
@@ -157,12 +157,12 @@ def run_batch(variants: Sequence[Variant], out_dir: Path, run_case: RunCase, opt
         except OSError as err:
             raise BatchError(out_dir, None, f"cannot be written ({err.strerror})", "free space or give another --out") from None
         if options.scheduler is not None:
-            from .cluster import connect, run_cluster
+            from orthosim.batch.cluster import connect, run_cluster
 
             client = connect(options.scheduler)
             outcomes = run_cluster(client, todo, out_dir, run_case, options.render_opts, options.run_timeout_s)
         else:
-            from .pool import run_local
+            from orthosim.batch.pool import run_local
 
             if options.prebuild_trees:
                 firsts = {}

@@ -5,7 +5,7 @@ every `--set KEY=V1,V2` value (the Cartesian product). KEY is a dotted path into
 `treatment.step_days`, `simulation.force_share`, `loads.0.force_cN` (a number indexes an array of
 tables). Each combination is a `Variant`: the exact TOML text that will run (written as
 `DIR/<run-id>/case.toml`, so every run can be reproduced alone with `orthosim run`), validated
-whole with `orthosim.case.load_case` here, so that a bad value in the sweep stops the batch before
+whole with `orthosim.exchange.case.load_case` here, so that a bad value in the sweep stops the batch before
 anything is simulated, with one line naming the variant and the field.
 """
 
@@ -22,8 +22,8 @@ from typing import Any, Sequence
 
 import tomli_w
 
-from ..case import DETECTORS, load_case
-from ..errors import CaseError, OrthosimError
+from orthosim.exchange.case import DETECTORS, load_case
+from orthosim.errors import CaseError, OrthosimError
 
 
 class BatchError(OrthosimError):

@@ -16,7 +16,7 @@ import signal
 from concurrent.futures import FIRST_COMPLETED, TimeoutError, wait
 from typing import Iterator, Sequence
 
-from .worker import RunCase, RunOutcome, RunTask, execute, init_local_worker, worker_environment
+from orthosim.batch.worker import RunCase, RunOutcome, RunTask, execute, init_local_worker, worker_environment
 
 
 def _death(err) -> str:

@@ -17,10 +17,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Sequence
 
-from .. import __version__
-from ..atomic import write_json, write_text
-from ..runfolder import RUN_FILE, RunFolderError, read_finished_run
-from .plan import Variant
+from orthosim import __version__
+from orthosim.storage.atomic import write_json, write_text
+from orthosim.runtime.runfolder import RUN_FILE, RunFolderError, read_finished_run
+from orthosim.batch.plan import Variant
 
 OK, FAILED, PENDING = "ok", "failed", "pending"
 MEASURES = ("steps", "collisions", "max_penetration_mm", "total_distance_initial_mm", "total_distance_final_mm",

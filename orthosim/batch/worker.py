@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from ..errors import OrthosimError
-from .table import run_summary
+from orthosim.errors import OrthosimError
+from orthosim.batch.table import run_summary
 
 WORKER_ENV = {
     "LP_NUM_THREADS": "1",  # Mesa llvmpipe rendering threads
@@ -38,7 +38,7 @@ WORKER_ENV = {
     "PYOPENGL_PLATFORM": "osmesa",
 }
 
-# What a local worker asks of each run (`run_case`'s render_opts, `orthosim.run.RunOptions`): one
+# What a local worker asks of each run (`run_case`'s render_opts, `orthosim.runtime.run.RunOptions`): one
 # core, as WORKER_ENV holds each library to one thread: the simulation in this process rather than
 # a child, and simulation, drawing and encoding on one thread (no prefetch or encoder threads,
 # ffmpeg on one thread). `orthosim run` alone keeps its pipeline, which keeps more than a core busy.

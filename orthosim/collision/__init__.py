@@ -13,13 +13,13 @@ collide ...`). How a tooth moves within a step (the
 motion every detector assumes) is `orthosim.geometry.motion`.
 """
 
-from ..geometry.motion import interpolate_pose
-from .broadphase import arch_neighbour_pairs, candidate_pairs, facing_pairs, sweep_and_prune
-from .contract import DETECTORS, CollisionError, CollisionRequest, Contacts, PairResult, StepResult
-from .detect import contacts, default_pairs, detect_step
-from .model import Body, CollisionModel
-from .queries import ExactQueries
-from .time_of_contact import first_time_of_contact
+from orthosim.geometry.motion import interpolate_pose
+from orthosim.collision.broadphase import arch_neighbour_pairs, candidate_pairs, facing_pairs, sweep_and_prune
+from orthosim.collision.contract import DETECTORS, CollisionError, CollisionRequest, Contacts, PairResult, StepResult
+from orthosim.collision.detect import contacts, default_pairs, detect_step
+from orthosim.collision.model import Body, CollisionModel
+from orthosim.collision.queries import ExactQueries
+from orthosim.collision.time_of_contact import first_time_of_contact
 
 __all__ = [
     "Body", "CollisionError", "CollisionModel", "CollisionRequest", "Contacts", "DETECTORS", "ExactQueries", "PairResult",

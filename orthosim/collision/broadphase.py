@@ -12,7 +12,7 @@ from typing import Iterable
 
 import numpy as np
 
-from ..fdi import Arch, arch_of, arch_order, opposing_quadrant, position, quadrant
+from orthosim.model.fdi import Arch, arch_of, arch_order, opposing_quadrant, position, quadrant
 
 
 def arch_neighbour_pairs(present: Iterable[int], absent: Iterable[int] = ()) -> list[tuple[int, int]]:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .model import CollisionModel
+from orthosim.collision.model import CollisionModel
 
 # Facing upper and lower teeth project onto each other, so their circles overlap by many mm; a
 # marker that large would hide the crowns it marks.

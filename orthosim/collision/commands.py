@@ -1,6 +1,7 @@
 """`orthosim collide ...`: the collision detectors' accuracy report, timings and a one-step query.
 
-Registered on the main CLI by `main.add_command(collide)` in `orthosim/cli.py`.
+Registered lazily on the main CLI by `orthosim/cli.py`, which also adds `collide bench` from
+`orthosim_bench.collision` (measurement lives outside the product).
 """
 
 from __future__ import annotations
@@ -10,8 +11,8 @@ from pathlib import Path
 
 import click
 
-from ..shareddata import open_full_jaw_dir
-from .contract import DETECTORS, CollisionError, CollisionRequest
+from orthosim.exchange.shareddata import open_full_jaw_dir
+from orthosim.collision.contract import DETECTORS, CollisionError, CollisionRequest
 
 
 
@@ -36,9 +37,9 @@ def collide() -> None:
               help="Sphere-tree builder method (trees are cached on disk).")
 def validate(out_file: Path, poses: int, motions: int, samples: int, seed: int, real_folder: Path, trees: str) -> None:
     """Sphere-tree detectors vs the exact mesh test: misses, false-positive rates, contact times."""
-    from ..spheretree.build import DEPTH, default_branching
-    from ..spheretree.cache import cached_sphere_tree
-    from .validate import run_validation
+    from orthosim.spheretree.build import DEPTH, default_branching
+    from orthosim.spheretree.cache import cached_sphere_tree
+    from orthosim.collision.validate import run_validation
 
     if not real_folder.is_dir():
         click.echo(f"orthosim: warning: no real teeth at {real_folder}; the study covers the parametric and "
@@ -67,37 +68,6 @@ def _headline(report: dict) -> dict:
 
 
 @collide.command()
-@click.option("--out", "out_file", type=click.Path(path_type=Path), default=None, help="Also write the JSON here.")
-@click.option("--resolution", type=click.Choice(["coarse", "smooth"]), default="smooth", show_default=True,
-              help="Parametric model resolution.")
-@click.option("--repeats", type=click.IntRange(1), default=50, show_default=True)
-@click.option("--trees", type=click.Choice(["fit", "octree"]), default="fit", show_default=True,
-              help="Sphere-tree builder method (trees are cached on disk).")
-@click.option("--keep-freed-memory", is_flag=True, help="Tune glibc to keep freed memory (see collision.memory).")
-def bench(out_file: Path | None, resolution: str, repeats: int, trees: str, keep_freed_memory: bool) -> None:
-    """Microseconds per whole-arch step of every detector and of python-fcl, same pairs, one run."""
-    if keep_freed_memory:
-        from .memory import keep_freed_memory as keep
-
-        keep()
-    from ..parametric import parametric_dentition
-    from ..spheretree.build import DEPTH, default_branching
-    from ..spheretree.cache import cached_sphere_tree
-    from .bench import collision_timings
-
-    res = collision_timings(parametric_dentition(resolution=resolution), repeats=repeats,
-                            tree_builder=lambda mesh: cached_sphere_tree(mesh, method=trees))
-    res["model"] = f"parametric {resolution}, {trees} sphere trees ({default_branching(trees)} x {DEPTH} levels)"
-    res["keep_freed_memory"] = keep_freed_memory
-    text = json.dumps(res, indent=1)
-    click.echo(text)
-    if out_file is not None:
-        from ..atomic import write_text
-
-        write_text(out_file, text)
-
-
-@collide.command()
 @click.argument("case", required=False, type=click.Path(path_type=Path))
 @click.option("--step", "step_number", type=click.IntRange(0), default=0, show_default=True,
               help="With CASE: the simulation step to query (0: the initial state).")
@@ -108,13 +78,13 @@ def bench(out_file: Path | None, resolution: str, repeats: int, trees: str, keep
               help="Sphere-tree builder method (trees are cached on disk).")
 def step(case: Path | None, step_number: int, detector: str, resolution: str, trees: str) -> None:
     """One whole-arch query: the case's teeth at a simulation step (default: the parametric model at rest)."""
-    from ..spheretree.cache import cached_sphere_tree
-    from .detect import detect_step
-    from .model import CollisionModel
+    from orthosim.spheretree.cache import cached_sphere_tree
+    from orthosim.collision.detect import detect_step
+    from orthosim.collision.model import CollisionModel
 
     builder = lambda mesh: cached_sphere_tree(mesh, method=trees)  # noqa: E731
     if case is None:
-        from ..parametric import parametric_dentition
+        from orthosim.model.parametric import parametric_dentition
 
         d = parametric_dentition(resolution=resolution)
         model = CollisionModel.from_dentition(d, tree_builder=builder)
@@ -122,8 +92,8 @@ def step(case: Path | None, step_number: int, detector: str, resolution: str, tr
         pairs = None
         where = {"model": d.description}
     else:
-        from ..case import load_case
-        from ..movement.simulation import MovementModel, simulate
+        from orthosim.exchange.case import load_case
+        from orthosim.movement.simulation import MovementModel, simulate
 
         c = load_case(case)
         if step_number > c.steps:

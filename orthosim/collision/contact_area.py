@@ -18,7 +18,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from ..spheretree.inside import Solid
+from orthosim.spheretree.inside import Solid
 
 TOUCH_TOLERANCE_MM = 0.05  # as near as the model's neighbours are placed to touch (see the README)
 

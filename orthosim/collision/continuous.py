@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .descent import compiled_descent, descend, sphere_overlap_test
-from .model import FLOAT32_MARGIN_MM, CollisionModel
-from ..geometry.motion import PosePath, chord_deviation_bound, max_speed, relative_speed_bound, rotation_angle
-from .queries import ExactQueries
-from .time_of_contact import contact_interval, contact_interval_from_dots, min_distance_over_step
+from orthosim.collision.descent import compiled_descent, descend, sphere_overlap_test
+from orthosim.collision.model import FLOAT32_MARGIN_MM, CollisionModel
+from orthosim.geometry.motion import PosePath, chord_deviation_bound, max_speed, relative_speed_bound, rotation_angle
+from orthosim.collision.queries import ExactQueries
+from orthosim.collision.time_of_contact import contact_interval, contact_interval_from_dots, min_distance_over_step
 
 
 def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, pair_idx: np.ndarray, first_only: bool = False,

@@ -17,8 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..detectors import DETECTORS
-from ..errors import OrthosimError
+from orthosim.collision.detectors import DETECTORS
+from orthosim.errors import OrthosimError
 
 
 class CollisionError(OrthosimError):

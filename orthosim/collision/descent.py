@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from .model import CollisionModel
+from orthosim.collision.model import CollisionModel
 
 _compiled = []  # the descent_compiled module, or None without numba (imported on first use)
 
@@ -30,7 +30,7 @@ def compiled_descent(use: bool = True):
     if not use:
         return None
     if not _compiled:
-        from . import descent_compiled
+        from orthosim.collision import descent_compiled
 
         _compiled.append(descent_compiled if descent_compiled.AVAILABLE else None)
     return _compiled[0]

@@ -12,16 +12,16 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .. import fdi as fdi_mod
-from ..geometry import meshquery
-from .broadphase import candidate_pairs, sweep_and_prune
-from .circles import bounding_circles, circles_overlap, overlap_spheres
-from .continuous import refine_time_of_contact, swept_leaves
-from .contract import DETECTORS, CollisionError, CollisionRequest, Contacts, StepResult, empty_leaves
-from .discrete import overlapping_leaves
-from .model import CollisionModel
-from ..geometry.motion import chord_deviation_bound, interpolate_poses, rotation_angle
-from .queries import ExactQueries
+from orthosim.model import fdi as fdi_mod
+from orthosim.geometry import meshquery
+from orthosim.collision.broadphase import candidate_pairs, sweep_and_prune
+from orthosim.collision.circles import bounding_circles, circles_overlap, overlap_spheres
+from orthosim.collision.continuous import refine_time_of_contact, swept_leaves
+from orthosim.collision.contract import DETECTORS, CollisionError, CollisionRequest, Contacts, StepResult, empty_leaves
+from orthosim.collision.discrete import overlapping_leaves
+from orthosim.collision.model import CollisionModel
+from orthosim.geometry.motion import chord_deviation_bound, interpolate_poses, rotation_angle
+from orthosim.collision.queries import ExactQueries
 
 
 DRAW_TOLERANCE_MM = 1e-3  # leaf centres drawn on their chords when the true path strays less

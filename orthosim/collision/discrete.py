@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .descent import compiled_descent, descend, sphere_overlap_test
-from .model import CollisionModel
+from orthosim.collision.descent import compiled_descent, descend, sphere_overlap_test
+from orthosim.collision.model import CollisionModel
 
 
 def overlapping_leaves(model: CollisionModel, poses: np.ndarray, pair_idx: np.ndarray, first_only: bool = False,

@@ -17,8 +17,8 @@ import trimesh
 from scipy.spatial import ConvexHull
 from trimesh.nsphere import minimum_nsphere
 
-from ..spheretree.tree import SphereTree
-from .contract import CollisionError
+from orthosim.spheretree.tree import SphereTree
+from orthosim.collision.contract import CollisionError
 
 
 # mm added to radii in float32 tests: float32 rounding of arch-frame coordinates (|x| < 100 mm)
@@ -211,7 +211,7 @@ class CollisionModel:
         with tqdm(total=len(todo), desc="sphere trees", unit="tooth", delay=1.0, leave=False,
                   disable=not sys.stderr.isatty()) as bar:
             if tree_builder is None:
-                from ..spheretree import cached_sphere_trees
+                from orthosim.spheretree import cached_sphere_trees
 
                 built = cached_sphere_trees([dentition.teeth[n].mesh for n in todo], progress=bar.update)
             else:
@@ -227,7 +227,7 @@ class CollisionModel:
 
 def default_tree_builder() -> Callable[[trimesh.Trimesh], SphereTree]:
     """The project's cached sphere-tree builder (`orthosim.spheretree`, method "fit", its default branching x 4 levels)."""
-    from ..spheretree import cached_sphere_tree
+    from orthosim.spheretree import cached_sphere_tree
 
     return lambda mesh: cached_sphere_tree(mesh)
 

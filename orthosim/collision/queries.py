@@ -48,8 +48,8 @@ from typing import Iterable, Mapping
 import numpy as np
 import trimesh
 
-from ..geometry import meshquery
-from .model import CollisionModel
+from orthosim.geometry import meshquery
+from orthosim.collision.model import CollisionModel
 
 APART_MARGIN_MM = 1e-6  # a pair proved apart by less than this is tested with FCL all the same
 PATCH_REACH_MM = 0.5  # a pair's patches hold every face within this of the other tooth when cut
@@ -280,7 +280,7 @@ class ExactQueries:
         return self._remember(self._depths, key, (hit, depth))
 
     def _depth(self, i: int, pose_i: np.ndarray, j: int, pose_j: np.ndarray) -> float:
-        from ..geometry.penetration import edge_penetration_depth, mesh_geometry  # numba: loaded on first use
+        from orthosim.geometry.penetration import edge_penetration_depth, mesh_geometry  # numba: loaded on first use
 
         mesh_i, mesh_j = self.model.bodies[i].mesh, self.model.bodies[j].mesh
         if mesh_geometry(mesh_i).closed and mesh_geometry(mesh_j).closed:  # both have an inside

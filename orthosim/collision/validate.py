@@ -27,13 +27,13 @@ import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from ..geometry import meshquery as exact
-from .continuous import refine_time_of_contact, swept_leaves_posed
-from .discrete import overlapping_leaves_posed
-from ..atomic import write_json
-from .model import Body, CollisionModel, default_tree_builder
-from ..geometry.motion import interpolate_pose, max_speed
-from .queries import ExactQueries
+from orthosim.geometry import meshquery as exact
+from orthosim.collision.continuous import refine_time_of_contact, swept_leaves_posed
+from orthosim.collision.discrete import overlapping_leaves_posed
+from orthosim.storage.atomic import write_json
+from orthosim.collision.model import Body, CollisionModel, default_tree_builder
+from orthosim.geometry.motion import interpolate_pose, max_speed
+from orthosim.collision.queries import ExactQueries
 
 OFFSET_MM = 0.5  # near contact: signed offset from first contact within +/- this
 FP_THRESHOLDS_MM = (0.1, 0.25, 0.5, 1.0, 2.0)
@@ -493,7 +493,7 @@ def default_tooth_sets(real_folder: str | Path | None = None, real_numbers=(3, 4
     """Parametric teeth at each resolution (adjacent pairs of one quadrant plus facing pairs), thin
     roots against coarse parametric crowns, and, when the folder exists, real Open-Full-Jaw upper
     teeth (neighbours along the arch)."""
-    from ..parametric import parametric_dentition
+    from orthosim.model.parametric import parametric_dentition
 
     fdis = [11, 12, 13, 14, 15, 16, 17, 41, 46]
     adj = tuple((k, k + 1) for k in range(6)) + ((0, 7), (5, 8))

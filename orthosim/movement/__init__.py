@@ -7,8 +7,8 @@ impact response), `simulation` (model, state and the step's phases; `simulate`),
 (metrics.json and distances.csv).
 """
 
-from .biomechanics import Motion, RateLaw, ToothMechanics, build_mechanics, movement_type, tooth_motion
-from .records import StepRecord
+from orthosim.movement.biomechanics import Motion, RateLaw, ToothMechanics, build_mechanics, movement_type, tooth_motion
+from orthosim.movement.records import StepRecord
 
 _FROM_SIMULATION = ("MovementModel", "MovementSettings", "StepState", "initial_state", "simulate", "step")
 
@@ -17,7 +17,7 @@ def __getattr__(name: str):
     # the step loop imports the collision package (FCL, numba): loaded when first asked for, so that
     # a process that only reads step records (`orthosim.movement.records`) does without
     if name in _FROM_SIMULATION:
-        from . import simulation
+        from orthosim.movement import simulation
 
         return getattr(simulation, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -43,10 +43,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .vec import length
+from orthosim.movement.vec import length
 
-from ..tooth import ROOT, Tooth
-from .resistance import center_of_resistance, tipping_center
+from orthosim.model.tooth import ROOT, Tooth
+from orthosim.movement.resistance import center_of_resistance, tipping_center
 
 # Tooth density for masses and inertias (mean of enamel, dentine and root): 2.2 g/cm^3 = 2.2e-3 g/mm^3.
 DENSITY_G_PER_MM3 = 2.2e-3
@@ -210,7 +210,7 @@ class Motion:
 
 
 def _rotation(rotvec: np.ndarray) -> np.ndarray:
-    from ..pose import rotation_about_axis
+    from orthosim.geometry.pose import rotation_about_axis
 
     a = length(rotvec)
     return np.eye(3) if a == 0.0 else rotation_about_axis(rotvec / a, a)

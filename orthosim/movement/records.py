@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from ..metrics import PairDistance
-    from .propagation import ForceBalance
+    from orthosim.analysis.metrics import PairDistance
+    from orthosim.movement.propagation import ForceBalance
 
 
 @dataclass(frozen=True, eq=False)

@@ -24,7 +24,7 @@ distances.csv: one row per adjacent pair: pair, initial_mm, final_mm. distances_
 row per step: step, time_days, total_distance_mm and each pair's distance (mm), the distance series
 of steps.jsonl as a table, also streamed. metrics.json and distances.csv are written atomically;
 steps.jsonl and distances_per_step.csv are written as the run goes (`orthosim run` writes
-its whole run folder in private and swaps it in at the end, `orthosim.outputfolder`).
+its whole run folder in private and swaps it in at the end, `orthosim.runtime.outputfolder`).
 """
 
 from __future__ import annotations
@@ -39,11 +39,11 @@ from typing import IO, Iterable, Iterator
 
 import numpy as np
 
-from ..atomic import atomic_path, to_jsonable, write_json, write_text
-from ..geometry.motion import rotation_angle
-from ..interpenetration import start_depths
-from .biomechanics import movement_type
-from .simulation import MovementModel, StepRecord
+from orthosim.storage.atomic import atomic_path, to_jsonable, write_json, write_text
+from orthosim.geometry.motion import rotation_angle
+from orthosim.collision.interpenetration import start_depths
+from orthosim.movement.biomechanics import movement_type
+from orthosim.movement.simulation import MovementModel, StepRecord
 
 
 STEPS_FILE = "steps.jsonl"

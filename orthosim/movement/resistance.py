@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import fdi as F
-from ..errors import CaseError
-from ..tooth import Tooth
+from orthosim.model import fdi as F
+from orthosim.errors import CaseError
+from orthosim.model.tooth import Tooth
 
 RULES = ("literature", "paper")
 CREST_BELOW_CEJ_MM = 1.5  # alveolar crest, mm apical of the CEJ (healthy periodontium)

@@ -44,20 +44,20 @@ from typing import Callable, Iterator, Mapping
 
 import numpy as np
 
-from .. import fdi as F
-from ..case import Case, Load
-from ..collision import (CollisionModel, CollisionRequest, Contacts, ExactQueries, candidate_pairs, contacts, detect_step,
+from orthosim.model import fdi as F
+from orthosim.exchange.case import Case, Load
+from orthosim.collision import (CollisionModel, CollisionRequest, Contacts, ExactQueries, candidate_pairs, contacts, detect_step,
                          interpolate_pose)
-from ..dentition import Dentition
-from ..detectors import DETECTORS
-from ..errors import CaseError
-from ..interpenetration import default_occlusal_slide_mm
-from ..metrics import tooth_to_tooth_distances
-from .biomechanics import Motion, RateLaw, ToothMechanics, build_mechanics, tooth_motion
-from .impact import Body, impact
-from .propagation import ForceBalance, propagate
-from .records import CollisionEvent, StepRecord
-from .vec import length
+from orthosim.model.dentition import Dentition
+from orthosim.collision.detectors import DETECTORS
+from orthosim.errors import CaseError
+from orthosim.collision.interpenetration import default_occlusal_slide_mm
+from orthosim.analysis.metrics import tooth_to_tooth_distances
+from orthosim.movement.biomechanics import Motion, RateLaw, ToothMechanics, build_mechanics, tooth_motion
+from orthosim.movement.impact import Body, impact
+from orthosim.movement.propagation import ForceBalance, propagate
+from orthosim.movement.records import CollisionEvent, StepRecord
+from orthosim.movement.vec import length
 
 @dataclass(frozen=True)
 class MovementSettings:
@@ -625,7 +625,7 @@ def _impact(model: MovementModel, pair, moves, P_contact, dt, centers, restituti
 
 def simulate(model: MovementModel, detector: str | None = None, steps: int | None = None,
              queries: ExactQueries | None = None) -> Iterator[StepRecord]:
-    """Run the case of `model` with `detector` (one of `orthosim.detectors.DETECTORS`; the case's by
+    """Run the case of `model` with `detector` (one of `orthosim.collision.detectors.DETECTORS`; the case's by
     default) for `steps` steps of the case's step_days (the case's count by default): the initial
     record (step 0), then one per `step`. queries: the run's exact queries on `model.collision`
     when the caller has prepared them (a fresh one otherwise)."""
@@ -647,7 +647,7 @@ def simulate_case(case: Case, detector: str | None = None, steps: int | None = N
     (and its dentition, when the caller has built it already: building one takes seconds).
 
     Everything it needs pickles, so it can run in a child process beside the renderer
-    (`orthosim.background.in_child_process(simulate_case, case, detector)`); the child builds the
+    (`orthosim.runtime.background.in_child_process(simulate_case, case, detector)`); the child builds the
     same model from the same case and yields the same records.
     """
     return simulate(MovementModel.build(case, dentition=dentition), detector, steps)

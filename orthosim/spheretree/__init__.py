@@ -7,10 +7,10 @@ meshes at once over every core; `read_sph` /
 the paper's error figures (sphere outside volume) and coverage.
 """
 
-from .build import build_sphere_tree
-from .cache import cached_sphere_tree, cached_sphere_trees
-from .measure import FitReport, measure_tree
-from .sph import read_sph, write_sph
-from .tree import SphereTree
+from orthosim.spheretree.build import build_sphere_tree
+from orthosim.spheretree.cache import cached_sphere_tree, cached_sphere_trees
+from orthosim.spheretree.measure import FitReport, measure_tree
+from orthosim.spheretree.sph import read_sph, write_sph
+from orthosim.spheretree.tree import SphereTree
 
 __all__ = ["SphereTree", "build_sphere_tree", "cached_sphere_tree", "cached_sphere_trees", "measure_tree", "FitReport", "read_sph", "write_sph"]

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import SphereTreeError
-from .fit import FIT_BRANCHING, build_fit_tree
-from .octree import MAX_OCTREE_DEPTH, build_octree_tree
-from .tree import SphereTree
+from orthosim.errors import SphereTreeError
+from orthosim.spheretree.fit import FIT_BRANCHING, build_fit_tree
+from orthosim.spheretree.octree import MAX_OCTREE_DEPTH, build_octree_tree
+from orthosim.spheretree.tree import SphereTree
 
 METHODS = ("fit", "octree")
 MAX_FIT_DEPTH = 8

@@ -8,7 +8,7 @@ loads one small .npz in milliseconds; a miss builds and writes the file atomical
 processes racing on the same tree both end with a whole file. The folder is `$ORTHOSIM_CACHE` if
 set, else `~/.cache/orthosim/spheretrees`.
 
-Left and right teeth are mirror images (x -> -x in the local frame, see `orthosim.tooth`), and a
+Left and right teeth are mirror images (x -> -x in the local frame, see `orthosim.model.tooth`), and a
 mirror maps a conservative tree to a conservative tree exactly (negating a float is exact), so a
 mesh and its mirror share one entry: the tree is built and stored for whichever of the two has the
 smaller key, and mirrored on the way out for the other. A full dentition costs half the builds,
@@ -29,11 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_path
-from ..lifeline import exit_with_parent
-from ..sourcedigest import source_digest
-from .build import DEPTH, build_sphere_tree, check_request, default_branching, mesh_arrays
-from .tree import SphereTree
+from orthosim.storage.atomic import atomic_path
+from orthosim.runtime.lifeline import exit_with_parent
+from orthosim.storage.sourcedigest import source_digest
+from orthosim.spheretree.build import DEPTH, build_sphere_tree, check_request, default_branching, mesh_arrays
+from orthosim.spheretree.tree import SphereTree
 
 BUILDER_VERSION = 10
 # Modules whose code decides what a built tree holds: their source is part of the key.
@@ -233,12 +233,12 @@ def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int | 
 
     def built():
         """(entry, tree) as each build finishes."""
-        # a daemonic process (the simulation child of a drawn run, orthosim.background) may not start any
+        # a daemonic process (the simulation child of a drawn run, orthosim.runtime.background) may not start any
         if workers <= 1 or multiprocessing.current_process().daemon:
             yield from ((e, _build(job)) for job, e in zip(jobs, waiting))
             return
         # fork: the children start at once with the parent's imports and compiled kernels
-        # each worker ends with this process if it is killed outright (orthosim.lifeline)
+        # each worker ends with this process if it is killed outright (orthosim.runtime.lifeline)
         with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
                                  initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
             futures = {pool.submit(_build, job): e for job, e in zip(jobs, waiting)}

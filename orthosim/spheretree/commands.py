@@ -27,8 +27,8 @@ from pathlib import Path
 import click
 import numpy as np
 
-from ..errors import SphereTreeError
-from .build import FIT_BRANCHING, METHODS, check_request, default_branching
+from orthosim.errors import SphereTreeError
+from orthosim.spheretree.build import FIT_BRANCHING, METHODS, check_request, default_branching
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply")
 
@@ -55,7 +55,7 @@ NUMBERINGS = ("fdi", "universal")
 def _fdi_in_name(path: Path, numbering: str | None) -> int | None:
     """The FDI number of a mesh file from the last number in its name, read as `numbering` says;
     None when no numbering is given (the file keeps its own name)."""
-    from ..fdi import is_fdi, universal_to_fdi
+    from orthosim.model.fdi import is_fdi, universal_to_fdi
 
     if numbering is None:
         return None
@@ -71,8 +71,8 @@ def _fdi_in_name(path: Path, numbering: str | None) -> int | None:
 
 def _open_full_jaw_as_scanned(folder: Path) -> list[NamedMesh]:
     """The `tooth_N.stl` meshes of an Open-Full-Jaw folder in the scan frame, named by FDI number."""
-    from ..fdi import universal_to_fdi
-    from ..meshload import load_tooth_mesh
+    from orthosim.model.fdi import universal_to_fdi
+    from orthosim.exchange.meshload import load_tooth_mesh
 
     out = []
     for p in sorted(folder.glob("tooth_*.stl")):
@@ -103,10 +103,10 @@ def load_source(source: Path, numbering: str | None = None, as_scanned: bool = F
     if not source.exists():
         raise SphereTreeError(source, None, "not found", "give a mesh file, a folder of meshes or a case .toml")
     if source.is_file() and source.suffix.lower() == ".toml":
-        from ..case import load_case
+        from orthosim.exchange.case import load_case
 
         return _from_dentition(load_case(source).build_dentition())
-    from ..meshload import load_tooth_mesh
+    from orthosim.exchange.meshload import load_tooth_mesh
 
     if source.is_file():
         if source.suffix.lower() not in MESH_SUFFIXES:
@@ -116,7 +116,7 @@ def load_source(source: Path, numbering: str | None = None, as_scanned: bool = F
         if _is_open_full_jaw(source):
             if as_scanned:
                 return _open_full_jaw_as_scanned(source)
-            from ..openfulljaw import load_open_full_jaw
+            from orthosim.exchange.openfulljaw import load_open_full_jaw
 
             return _from_dentition(load_open_full_jaw(source))
         files = sorted(p for p in source.iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
@@ -183,8 +183,8 @@ def build(source: Path, method: str, branching: int, depth: int | None, out_dir:
     """Build the sphere tree of every tooth in SOURCE (mesh, folder or case .toml) into OUT."""
     import tempfile
 
-    from .cache import cached_sphere_trees, save_tree
-    from .sph import write_sph
+    from orthosim.spheretree.cache import cached_sphere_trees, save_tree
+    from orthosim.spheretree.sph import write_sph
 
     depth = _depth(method, depth)
     branching = default_branching(method, branching)
@@ -217,9 +217,9 @@ def evaluate(sources: tuple[Path, ...], method: str, branching: int, depth: int 
              surface_samples: int, seed: int, numbering: str | None) -> None:
     """Build and measure the trees of SOURCES (meshes, folders, cases): SOV (summed, union), coverage,
     build time -> JSON, per tooth and as a mean with its standard error."""
-    from ..atomic import write_json
-    from .build import build_sphere_tree
-    from .measure import measure_tree
+    from orthosim.storage.atomic import write_json
+    from orthosim.spheretree.build import build_sphere_tree
+    from orthosim.spheretree.measure import measure_tree
 
     depth = _depth(method, depth)
     branching = default_branching(method, branching)

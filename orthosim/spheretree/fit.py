@@ -39,10 +39,10 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
-from .enclose import enclosing_spheres, node_vertex_groups, radii_to_cover, radii_to_cover_each
-from .measure import mesh_volume
-from .outside_band import OutsideBand
-from .tree import SphereTree
+from orthosim.spheretree.enclose import enclosing_spheres, node_vertex_groups, radii_to_cover, radii_to_cover_each
+from orthosim.spheretree.measure import mesh_volume
+from orthosim.spheretree.outside_band import OutsideBand
+from orthosim.spheretree.tree import SphereTree
 
 
 # The optimising builder's branching when none is asked: 9 (1, 9, 81 and up to 729 leaves at depth

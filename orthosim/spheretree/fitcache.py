@@ -14,10 +14,10 @@ import dataclasses
 import json
 from pathlib import Path
 
-from ..atomic import write_json
-from .build import DEPTH, default_branching
-from .cache import _entry, cached_sphere_tree, default_cache_dir
-from .measure import FitReport, measure_tree
+from orthosim.storage.atomic import write_json
+from orthosim.spheretree.build import DEPTH, default_branching
+from orthosim.spheretree.cache import _entry, cached_sphere_tree, default_cache_dir
+from orthosim.spheretree.measure import FitReport, measure_tree
 
 # Fewer samples than `orthosim spheretree eval`'s defaults: the summed SOV's standard error is
 # about 0.007 at these counts (against 0.0025), enough for a table; the figure carries it.

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .inside import Solid
-from .tree import SphereTree
+from orthosim.spheretree.inside import Solid
+from orthosim.spheretree.tree import SphereTree
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .tree import SphereTree
+from orthosim.spheretree.tree import SphereTree
 
 MAX_OCTREE_DEPTH = 12  # 2**11 cells per axis at the leaves: far below any triangle's size
 

@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 from scipy import ndimage
 
-from .inside import CrossingIndex
+from orthosim.spheretree.inside import CrossingIndex
 
 
 @njit(cache=True, nogil=True, inline="always")

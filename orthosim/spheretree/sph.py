@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..atomic import write_text
-from ..errors import SphereTreeError
-from .tree import SphereTree
+from orthosim.storage.atomic import write_text
+from orthosim.errors import SphereTreeError
+from orthosim.spheretree.tree import SphereTree
 
 
 def _slots_per_level(depth: int, branching: int) -> list[int]:

@@ -5,7 +5,7 @@ sorted by parent, so the children of node i of level k-1 are the slice
 `child_offsets[k][i] : child_offsets[k][i + 1]` of level k: a descent can gather the children of
 many nodes at once with numpy, without Python loops over nodes.
 
-Coordinates are in the tooth's local frame (mm, see `orthosim.tooth`); a pose maps them to the arch
+Coordinates are in the tooth's local frame (mm, see `orthosim.model.tooth`); a pose maps them to the arch
 frame. Invariants every builder must keep (checked by `validate`):
   - conservative: every surface triangle of the tooth lies inside its leaf sphere, and inside that
     leaf's parent, and so on up to the root, so a descent that prunes a node never loses a

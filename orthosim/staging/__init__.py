@@ -5,5 +5,5 @@ Modules: `target` (the case's `[start]` and `[target]` sections, movements in th
 terms, target meshes registered to the start), `limits` (per-stage limits), `contacts` (the exact
 check of one stage's motion), `ipr` (interproximal reduction where teeth do not fit at the
 target), `plan` (the planner), `chart` (stages.json, staging.csv, ipr.csv), `commands`
-(`orthosim stage`, the core half; the drawing is `render.staging`), `bench` (planning time).
+(`orthosim stage`, the core half; the drawing is `orthosim_render.staging`), `bench` (planning time).
 """

@@ -1,7 +1,7 @@
 """The staging outputs: stages.json (every tooth's pose at every stage), staging.csv (the staging
 chart: one row per tooth and stage, each movement component), ipr.csv, and the summary line.
 
-All written atomically (`orthosim.atomic`); the caller writes run.json after them.
+All written atomically (`orthosim.storage.atomic`); the caller writes run.json after them.
 """
 
 from __future__ import annotations
@@ -12,11 +12,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
-from ..atomic import write_json, write_text
-from .ipr import USUAL_MAX_PER_CONTACT_MM
-from .plan import StagingPlan
-from .target import COMPONENTS, UNITS
+from orthosim import __version__
+from orthosim.storage.atomic import write_json, write_text
+from orthosim.staging.ipr import USUAL_MAX_PER_CONTACT_MM
+from orthosim.staging.plan import StagingPlan
+from orthosim.staging.target import COMPONENTS, UNITS
 
 CHART_COLUMNS = ("stage", "fdi") + tuple(f"{c}_{UNITS[c]}" for c in COMPONENTS) + ("progress", "held")
 IPR_COLUMNS = ("fdi_a", "fdi_b", "ipr_mm", "per_surface_mm", "before_stage", "above_guideline")

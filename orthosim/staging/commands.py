@@ -1,6 +1,6 @@
 """`orthosim stage`, the core half: read a case, plan its staging, list the contacts to highlight.
 
-The command itself lives in `orthosim/cli.py` (it also draws, through `render.staging`); this
+The command itself lives in `orthosim/cli.py` (it also draws, through `orthosim_render.staging`); this
 module does everything that does not draw, so a script can stage a case without OpenGL:
 
     run = plan_case("cases/staging_lower_incisor_crowding.toml", StageLimits.parse("tip=1.5"))
@@ -14,24 +14,24 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import CaseError
-from .limits import StageLimits
-from .plan import StagingPlan, plan_staging
+from orthosim.errors import CaseError
+from orthosim.staging.limits import StageLimits
+from orthosim.staging.plan import StagingPlan, plan_staging
 
 
 @dataclass(frozen=True, eq=False)
 class StagingRun:
-    case: object  # orthosim.case.Case
-    dentition: object  # orthosim.dentition.Dentition (every tooth of the model)
+    case: object  # orthosim.exchange.case.Case
+    dentition: object  # orthosim.model.dentition.Dentition (every tooth of the model)
     model: object  # orthosim.collision.CollisionModel of the staged teeth
     plan: StagingPlan
 
 
 def plan_case(case_path: str | Path, limits: StageLimits = StageLimits(), model=None) -> StagingRun:
     """Load and validate the case, build its teeth and collision model, plan the staging."""
-    from ..case import load_case
-    from ..collision import CollisionModel
-    from ..dentition import Dentition
+    from orthosim.exchange.case import load_case
+    from orthosim.collision import CollisionModel
+    from orthosim.model.dentition import Dentition
 
     case = load_case(case_path)
     if case.staging is None or case.staging.target is None:
@@ -50,7 +50,7 @@ def plan_case(case_path: str | Path, limits: StageLimits = StageLimits(), model=
 def ipr_contact_points(run: StagingRun, stage: int) -> tuple[np.ndarray, tuple[tuple[int, int], ...]]:
     """((m, 3) mm arch-frame points, pairs): where the full (unreduced) meshes of each IPR pair
     intersect at `stage`: the enamel the reduction removes, what the animation highlights."""
-    from ..collision import CollisionRequest, detect_step
+    from orthosim.collision import CollisionRequest, detect_step
 
     pairs = [(r.a, r.b) for r in run.plan.ipr]
     if not pairs:

@@ -23,11 +23,11 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..collision.broadphase import sweep_and_prune
-from ..collision.continuous import swept_leaves_posed
-from ..collision.model import CollisionModel
-from ..geometry.motion import PosePath, chord_deviation_bound, relative_speed_bound, rotation_angle
-from ..collision.queries import ExactQueries
+from orthosim.collision.broadphase import sweep_and_prune
+from orthosim.collision.continuous import swept_leaves_posed
+from orthosim.collision.model import CollisionModel
+from orthosim.geometry.motion import PosePath, chord_deviation_bound, relative_speed_bound, rotation_angle
+from orthosim.collision.queries import ExactQueries
 
 TOLERANCE_MM = 0.002  # resolution of the exact check (see the module docstring)
 

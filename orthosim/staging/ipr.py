@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..collision.queries import ExactQueries
-from ..errors import OrthosimError
-from ..geometry import meshquery
+from orthosim.collision.queries import ExactQueries
+from orthosim.errors import OrthosimError
+from orthosim.geometry import meshquery
 
 RESOLUTION_MM = 1e-3  # bisection resolution of the reduction
 CLEARANCE_MM = 0.01  # extra room left between the reduced surfaces, above the contact check's resolution

@@ -14,8 +14,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..errors import OrthosimError
-from .target import COMPONENTS, UNITS
+from orthosim.errors import OrthosimError
+from orthosim.staging.target import COMPONENTS, UNITS
 
 
 class LimitsError(OrthosimError):

@@ -25,15 +25,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import fdi as F
-from ..collision.broadphase import arch_neighbour_pairs
-from ..collision.model import CollisionModel
-from ..geometry.motion import interpolate_pose
-from ..dentition import Dentition
-from .contacts import StageChecker
-from .ipr import InterproximalReduction, StagingError, reduction_for
-from .limits import StageLimits
-from .target import movement_components
+from orthosim.model import fdi as F
+from orthosim.collision.broadphase import arch_neighbour_pairs
+from orthosim.collision.model import CollisionModel
+from orthosim.geometry.motion import interpolate_pose
+from orthosim.model.dentition import Dentition
+from orthosim.staging.contacts import StageChecker
+from orthosim.staging.ipr import InterproximalReduction, StagingError, reduction_for
+from orthosim.staging.limits import StageLimits
+from orthosim.staging.target import movement_components
 
 _EPS = 1e-9
 

@@ -4,7 +4,7 @@ A target is given per tooth as a movement in the tooth's own terms, or as a fold
 teeth in their final positions. Either way it becomes a target pose per tooth (4x4, local -> arch
 frame, mm), reached from the start pose along the motion the continuous detector checks.
 
-Movement components, all in the tooth's frame at the start (`orthosim.tooth`; local origin at the
+Movement components, all in the tooth's frame at the start (`orthosim.model.tooth`; local origin at the
 CEJ centre on the long axis, which is also the centre of every rotation):
   mesial_mm     the origin's displacement along `Tooth.mesial` (negative: distal)
   buccal_mm     along the labial/buccal axis (local +z; negative: lingual)
@@ -25,7 +25,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..errors import CaseError
+from orthosim.errors import CaseError
+from orthosim.exchange.casefields import FieldReader
 
 COMPONENTS = ("mesial", "buccal", "extrusion", "tip", "torque", "rotation")  # chart and limit order
 UNITS = {"mesial": "mm", "buccal": "mm", "extrusion": "mm", "tip": "deg", "torque": "deg", "rotation": "deg"}
@@ -74,7 +75,7 @@ def target_pose(tooth, start_pose: np.ndarray, movement: ToothMovement) -> np.nd
     axes = local_axes(tooth)
     offset = c[:3] @ axes[:3]  # local mm
     w = np.radians(c[3:]) @ axes[3:]  # local rotation vector, radians
-    from ..geometry.motion import rotation_matrix
+    from orthosim.geometry.motion import rotation_matrix
 
     M = np.eye(4)
     M[:3, :3] = rotation_matrix(w)
@@ -86,7 +87,7 @@ def movement_components(tooth, start_pose: np.ndarray, pose_a: np.ndarray, pose_
     """(6,) the motion from pose_a to pose_b in the tooth's start frame: mm, mm, mm, deg, deg, deg
     (COMPONENTS order). Translation is of the local origin; angles are the components of the
     rotation vector of the motion (the motion law's rotation: `geometry.motion`)."""
-    from ..geometry.motion import rotation_vector
+    from orthosim.geometry.motion import rotation_vector
 
     R0 = np.asarray(start_pose, float)[:3, :3]
     axes = local_axes(tooth)
@@ -111,7 +112,6 @@ def read_target(path: Path, raw: Any, present: set[int], extracted: set[int], se
         buccal_mm = 0.8
         rotation_deg = -6
     """
-    from ..case import _Reader  # the case file's typed reader: same messages as every other section
 
     keys = tuple(str(k) for k in raw) if isinstance(raw, dict) else ()
     allowed = _TARGET_KEYS if section == "target" else ()
@@ -120,7 +120,7 @@ def read_target(path: Path, raw: Any, present: set[int], extracted: set[int], se
             if not k.isdigit():
                 raise CaseError(path, f"start.{k}", "unknown key",
                                 "[start] takes per-tooth tables only, e.g. [start.41] buccal_mm = -2")
-    r = _Reader(path, section, raw, allowed + tuple(k for k in keys if k.isdigit()))
+    r = FieldReader(path, section, raw, allowed + tuple(k for k in keys if k.isdigit()))
     teeth = [k for k in r.table if k.isdigit()]
     if "folder" in r.table:
         if teeth:
@@ -137,7 +137,7 @@ def read_target(path: Path, raw: Any, present: set[int], extracted: set[int], se
         number = r.tooth(key, int(key), present)
         if number in extracted:
             r.fail(key, f"tooth {number} is extracted in this case and cannot be moved", "remove its target")
-        m = _Reader(path, f"{section}.{key}", r.table[key], _MOVEMENT_KEYS)
+        m = FieldReader(path, f"{section}.{key}", r.table[key], _MOVEMENT_KEYS)
         values = {k: m.number(k, 0.0, minimum=None) for k in _MOVEMENT_KEYS}
         for k, v in values.items():
             bound = _LIMIT_MM if k.endswith("_mm") else _LIMIT_DEG
@@ -191,7 +191,7 @@ def target_poses(dentition, spec: TargetSpec, start: Mapping[int, np.ndarray] | 
         for n, mv in spec.movements.items():
             out[n] = target_pose(dentition.teeth[n], start[n], mv)
         return out
-    from ..meshload import load_tooth_mesh
+    from orthosim.exchange.meshload import load_tooth_mesh
 
     for name, n in spec.files.items():
         file = spec.folder / name

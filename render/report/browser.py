@@ -22,7 +22,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from orthosim.atomic import write_bytes
+from orthosim.storage.atomic import write_bytes
 from orthosim.errors import OrthosimError
 
 FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from orthosim.atomic import write_bytes
-from orthosim.distancemap import CONTACT_MM, NEAR_MM
-from orthosim.fdi import Arch, arch_of
-from orthosim.spaceanalysis import GAP_THRESHOLD_MM
+from orthosim.storage.atomic import write_bytes
+from orthosim.analysis.distancemap import CONTACT_MM, NEAR_MM
+from orthosim.model.fdi import Arch, arch_of
+from orthosim.analysis.spaceanalysis import GAP_THRESHOLD_MM
 
 DETECTOR_COLORS = {"circles": "#e0882b", "discrete": "#3c78c8", "continuous": "#2e9e5b", "exact": "#8a4fbf"}
 INITIAL_COLOR = "#9aa0a8"
@@ -98,8 +98,8 @@ def distance_colorbar(out: Path) -> Path:
     from matplotlib.colors import LinearSegmentedColormap
     from matplotlib.patches import Rectangle
 
-    from ..scene import CONTACT_COLOR, CROWN_COLOR
-    from .pictures import NEAR_STOPS, PENETRATION_COLOR
+    from orthosim_render.scene import CONTACT_COLOR, CROWN_COLOR
+    from orthosim_render.report.pictures import NEAR_STOPS, PENETRATION_COLOR
 
     fig = _figure(7.5, 0.95)
     ax = fig.add_axes([0.03, 0.45, 0.94, 0.32])

@@ -15,15 +15,15 @@ from typing import Sequence
 
 import numpy as np
 
-from orthosim.case import load_case
-from orthosim.contacttable import ContactParts, PairContact, StepContacts, contact_table
-from orthosim.detectors import DETECTORS as DETECTOR_ORDER
-from orthosim.distancemap import DistanceMapModel, ToothDistances
+from orthosim.exchange.case import load_case
+from orthosim.analysis.contacttable import ContactParts, PairContact, StepContacts, contact_table
+from orthosim.collision.detectors import DETECTORS as DETECTOR_ORDER
+from orthosim.analysis.distancemap import DistanceMapModel, ToothDistances
 from orthosim.errors import OrthosimError
-from orthosim.occlusion import bolton_ratios
-from orthosim.spaceanalysis import ArchSpace, arch_space, widths_mm
+from orthosim.analysis.occlusion import bolton_ratios
+from orthosim.analysis.spaceanalysis import ArchSpace, arch_space, widths_mm
 
-from .runs import RunData
+from orthosim_render.report.runs import RunData
 
 
 class ReportInputError(OrthosimError):

@@ -15,14 +15,14 @@ from pathlib import Path
 from typing import Sequence
 
 from orthosim import __version__
-from orthosim.atomic import write_json, write_text
-from orthosim.distancemap import CLASS_NAMES, CONTACT_MM, NEAR_MM, summarize
-from orthosim.spaceanalysis import GAP_THRESHOLD_MM
+from orthosim.storage.atomic import write_json, write_text
+from orthosim.analysis.distancemap import CLASS_NAMES, CONTACT_MM, NEAR_MM, summarize
+from orthosim.analysis.spaceanalysis import GAP_THRESHOLD_MM
 
-from . import figures
-from .gather import CaseData, build_dentitions, gather_case, group_runs
-from .pictures import CONTACT_VIEWS, MAP_VIEWS, VIEW_TITLES, CasePictures, pose_label
-from .runs import RunData, read_run
+from orthosim_render.report import figures
+from orthosim_render.report.gather import CaseData, build_dentitions, gather_case, group_runs
+from orthosim_render.report.pictures import CONTACT_VIEWS, MAP_VIEWS, VIEW_TITLES, CasePictures, pose_label
+from orthosim_render.report.runs import RunData, read_run
 
 TARGET_FPS = 40.0
 PICTURE_SIZE = (480, 360)
@@ -102,7 +102,7 @@ def build_report(runs: Sequence[RunData | str | Path], out_dir: str | Path, *, p
     img.mkdir(parents=True, exist_ok=True)
     say = progress or (lambda text: None)
 
-    from ..renderer import Renderer
+    from orthosim_render.renderer import Renderer
 
     cases = []
     dentitions = build_dentitions(groups)  # before the renderer's GL context: builds in forked processes
@@ -141,7 +141,7 @@ def build_report(runs: Sequence[RunData | str | Path], out_dir: str | Path, *, p
     write_json(out_dir / "report.json", report)
     write_text(out_dir / "index.html", render_page(report))
     if pdf:
-        from .browser import print_pdf
+        from orthosim_render.report.browser import print_pdf
 
         print_pdf(out_dir / "index.html", out_dir / "report.pdf")
     report["build_s"] = time.perf_counter() - started

@@ -1,6 +1,6 @@
 """The report's rendered pictures: occlusal contact areas (the paper's Figure 7) and the inter-arch
 distance map, each from the clinical views, before and after treatment, with FDI labels, a legend,
-the extraction gaps and a scale bar drawn on by `render.overlay`.
+the extraction gaps and a scale bar drawn on by `orthosim_render.overlay`.
 
 One renderer (one GL context) for the whole report and one scene per dentition; crowns only (the
 roots would hide the occlusal surfaces the figures are about); each picture is a PNG beside the page.
@@ -13,14 +13,14 @@ from pathlib import Path
 
 import numpy as np
 
-from orthosim.atomic import write_bytes
-from orthosim.distancemap import CONTACT_MM, NEAR_MM, PENETRATION, CONTACT, NEAR, classify
-from orthosim.fdi import arch_of
+from orthosim.storage.atomic import write_bytes
+from orthosim.analysis.distancemap import CONTACT_MM, NEAR_MM, PENETRATION, CONTACT, NEAR, classify
+from orthosim.model.fdi import arch_of
 
-from ..frame_state import FrameState
-from ..overlay import (GAP_COLOR, blend, draw_scale_bar, font_px_for, label_view, legend_patch, text_patch)
-from ..png import encode_png
-from ..scene import CONTACT_COLOR, CROWN_COLOR, DentitionScene, paint_crowns
+from orthosim_render.frame_state import FrameState
+from orthosim_render.overlay import (GAP_COLOR, blend, draw_scale_bar, font_px_for, label_view, legend_patch, text_patch)
+from orthosim_render.png import encode_png
+from orthosim_render.scene import CONTACT_COLOR, CROWN_COLOR, DentitionScene, paint_crowns
 
 CONTACT_VIEWS = ("maxillary_occlusal", "mandibular_occlusal", "frontal")
 MAP_VIEWS = ("maxillary_occlusal", "mandibular_occlusal")

@@ -1,6 +1,6 @@
 """What a report reads from a finished run folder: the one place that knows the run's file layout.
 
-A folder counts only if `orthosim.runfolder.read_finished_run` accepts it (run.json written last,
+A folder counts only if `orthosim.runtime.runfolder.read_finished_run` accepts it (run.json written last,
 this orthosim version); then metrics.json gives the figures. Everything the report needs from a
 run is copied here into a `RunData`, so a change in what `orthosim run` writes is met here alone.
 The case file named in run.json must still be the one the run used (same SHA-256): the report
@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from orthosim.movement.report import STEPS_FILE, read_steps
-from orthosim.runfolder import RunFolderError, file_sha256, read_finished_run
+from orthosim.runtime.runfolder import RunFolderError, file_sha256, read_finished_run
 
 
 @dataclass(frozen=True, eq=False)

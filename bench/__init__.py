@@ -1,0 +1,8 @@
+"""Measurement of orthosim from outside the product: `orthosim bench` and the studies behind it.
+
+Installed as `orthosim_bench`. Nothing in `orthosim/` (but the CLI, the composition root) or in
+`render/` imports it; each module takes what it measures as arguments.
+`render` (stage and end-to-end throughput, the bench record), `collision` (detector timings),
+`spheretree` (tree build), `batch` (animations per minute), `staging` (staging time), `report`
+(report time), `memory` (peak memory of long runs), `startup` (launch to first step).
+"""

@@ -1,0 +1,277 @@
+"""Peak memory of long runs, each measured on `orthosim run` launched as a fresh child process.
+
+`orthosim bench` records two figures (target: under 500 MB each), so that memory that grows with a
+run's length shows as a number rather than as a machine that starts swapping:
+  - `run_10k_steps_no_render_mb`: a case run for 10,000 simulation steps with `--no-render`
+    (every step's record streams to steps.jsonl; nothing should grow with the step count);
+  - `render_2000_frames_mb`: the case drawn into at least 2,000 frames at 640x480 (PNG frames and
+    the MP4), the simulation in its own child process as `orthosim run` does.
+Each is the peak, over the run, of the memory of the launched process and all its descendants (the
+simulation child, the video encoder), sampled from /proc while it runs, and never less than the
+largest high-water mark (VmHWM) of any single process of that tree, which the kernel keeps so that
+no sampling can miss a process's own peak. Which memory: the tree's distinct resident physical
+pages (from /proc/PID/pagemap, every `unique_interval_s`), each page once however many of the
+tree's processes map it. That is what the run takes from the machine. Summed RSS, kept beside it,
+counts every page a forked child shares with its parent twice (the simulation child is a fork made
+after the shared imports and the model load: ~70 MB of libraries and objects counted twice); PSS, kept
+beside it too, splits each shared page among all processes mapping it, including processes outside
+the run (other programs mapping the same libraries), so it reads low on a busy machine. Reading
+page frames needs CAP_SYS_ADMIN (root); without it the headline is the PSS and `peak_measure` says
+so. Not the kernel's `ru_maxrss` of the child: it keeps the RSS of the process that forked it (the
+bench itself, hundreds of MB) as it was at exec. The launching process's memory never counts.
+Linux only (/proc).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import tomllib
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+TARGET_MB = 500.0
+
+
+@dataclass(frozen=True)
+class PeakMemory:
+    """What one measured child run used: `peak_mb` is the figure to read (see the module docstring)."""
+
+    peak_mb: float  # the figure checked against the target (module doc): max(tree's unique pages, or its PSS, largest VmHWM), MB
+    tree_rss_sampled_peak_mb: float  # summed RSS of the process tree, highest sample, MB (counts a page shared by n processes n times)
+    tree_pss_sampled_peak_mb: float  # summed PSS (each shared page split among all processes mapping it), highest sample, MB
+    tree_unique_sampled_peak_mb: float | None  # distinct physical pages resident in the tree, highest sample (every unique_interval_s), MB; None where page frames are hidden
+    peak_measure: str  # "unique pages" or "PSS": what peak_mb is made of
+    largest_process_peak_mb: float  # the largest VmHWM of one process of the tree, MB
+    processes_seen: int  # distinct processes of the tree seen while sampling
+    process_peaks_mb: tuple[tuple[str, float], ...]  # (command name, VmHWM MB) of each process seen, largest first
+    samples: int
+    wall_s: float
+    exit_code: int
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    try:
+        for tid in os.listdir(f"/proc/{pid}/task"):
+            with open(f"/proc/{pid}/task/{tid}/children") as f:
+                out.extend(int(c) for c in f.read().split())
+    except (OSError, ValueError):
+        pass
+    return out
+
+
+def _rss_and_hwm_kb(pid: int) -> tuple[int, int]:
+    """(VmRSS, VmHWM) of a process, kB; (0, 0) once it is gone."""
+    rss = hwm = 0
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    rss = int(line.split()[1])
+                elif line.startswith("VmHWM:"):
+                    hwm = int(line.split()[1])
+    except (OSError, ValueError, IndexError):
+        pass
+    return rss, hwm
+
+
+def _pss_kb(pid: int) -> int:
+    """Proportional set size of a process, kB (each shared page split among the processes sharing it); 0 once gone."""
+    try:
+        with open(f"/proc/{pid}/smaps_rollup") as f:
+            for line in f:
+                if line.startswith("Pss:"):
+                    return int(line.split()[1])
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0
+
+
+_PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
+_PFN_MASK = (1 << 55) - 1
+_PRESENT = 1 << 63
+
+
+class _Hidden(Exception):
+    """Page frame numbers read as zeros: reading them needs CAP_SYS_ADMIN."""
+
+
+def _frames(pid: int):
+    """The physical page frame numbers of a process's resident pages (a numpy array), from
+    /proc/PID/pagemap; None when it cannot be read now (gone, or changing: an exec). Raises `_Hidden`
+    when the kernel hides the frames."""
+    import numpy as np
+
+    found = []
+    try:
+        with open(f"/proc/{pid}/maps") as maps, open(f"/proc/{pid}/pagemap", "rb", buffering=0) as pagemap:
+            fd = pagemap.fileno()
+            for line in maps:
+                lo, hi = (int(x, 16) for x in line.split(None, 1)[0].split("-"))
+                if line.rstrip().endswith("[vsyscall]"):
+                    continue
+                data = os.pread(fd, (hi - lo) // _PAGE * 8, lo // _PAGE * 8)
+                entries = np.frombuffer(data, np.uint64)
+                found.append(entries[(entries & np.uint64(_PRESENT)) != 0] & np.uint64(_PFN_MASK))
+    except (OSError, ValueError):
+        return None
+    frames = np.concatenate(found) if found else np.zeros(0, np.uint64)
+    if len(frames) and not frames.any():
+        raise _Hidden(pid)
+    return frames
+
+
+def _tree_unique_kb(pids) -> int:
+    """kB of distinct physical pages resident in any process of `pids` (each page once, however many
+    of them map it); 0 when a process could not be read this time (the sample is skipped). Raises
+    `_Hidden` when page frames cannot be read here."""
+    import numpy as np
+
+    parts = []
+    for p in pids:
+        frames = _frames(p)
+        if frames is None:
+            return 0
+        parts.append(frames)
+    if not parts:
+        return 0
+    return int(len(np.unique(np.concatenate(parts)))) * _PAGE // 1024
+
+
+def _command(pid: int) -> str:
+    """The start of a process's command line (program name and its first arguments), for the record."""
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            words = [w.decode(errors="replace") for w in f.read().split(b"\0") if w]
+        return " ".join([os.path.basename(words[0]), *words[1:4]]).replace("\n", " ")[:100] if words else "?"
+    except OSError:
+        return "?"
+
+
+def _tree(pid: int) -> list[int]:
+    seen, todo = [], [pid]
+    while todo:
+        p = todo.pop()
+        seen.append(p)
+        todo.extend(_children(p))
+    return seen
+
+
+def measure_peak_memory(argv: list[str], *, cwd: str | Path | None = None, env: dict | None = None,
+                        interval_s: float = 0.05, unique_interval_s: float = 1.0, timeout_s: float = 3600.0) -> PeakMemory:
+    """Run `argv` as a child process to its end and return its peak memory (`PeakMemory`, MB).
+
+    Output is discarded. A run still going after `timeout_s` is killed (its exit code then says so).
+    """
+    if not os.path.isdir("/proc/self/task"):
+        raise OSError("measuring a process tree's memory needs Linux's /proc")
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(argv, cwd=cwd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    tree_kb, pss_kb, hwm_kb, samples, seen, names = 0, 0, {}, 0, set(), {}
+    unique_kb: int | None = 0
+    next_unique = time.monotonic()
+    deadline = time.monotonic() + timeout_s
+    while proc.poll() is None:
+        pids = _tree(proc.pid)
+        seen.update(pids)
+        total = 0
+        for p in pids:
+            if p not in names:
+                names[p] = _command(p)
+            rss, hwm = _rss_and_hwm_kb(p)
+            total += rss
+            hwm_kb[p] = max(hwm_kb.get(p, 0), hwm)
+        tree_kb = max(tree_kb, total)
+        pss_kb = max(pss_kb, sum(_pss_kb(p) for p in pids))
+        if unique_kb is not None and time.monotonic() >= next_unique:  # tens of ms a time: every unique_interval_s
+            try:
+                unique_kb = max(unique_kb, _tree_unique_kb(pids))
+            except _Hidden:
+                unique_kb = None
+            next_unique = time.monotonic() + unique_interval_s
+        samples += 1
+        if time.monotonic() > deadline:
+            proc.kill()
+            proc.wait()
+            break
+        time.sleep(interval_s)
+    tree_mb, largest_mb = tree_kb / 1024.0, max(hwm_kb.values(), default=0) / 1024.0
+    unique_mb = None if unique_kb is None else unique_kb / 1024.0
+    headline = unique_mb if unique_mb is not None else pss_kb / 1024.0
+    return PeakMemory(peak_mb=max(headline, largest_mb), tree_rss_sampled_peak_mb=tree_mb,
+                      tree_pss_sampled_peak_mb=pss_kb / 1024.0, tree_unique_sampled_peak_mb=unique_mb,
+                      peak_measure="unique pages" if unique_mb is not None else "PSS",
+                      largest_process_peak_mb=largest_mb, processes_seen=len(seen),
+                      process_peaks_mb=tuple(sorted(((names.get(p, "?"), kb / 1024.0) for p, kb in hwm_kb.items()),
+                                                    key=lambda item: -item[1])),
+                      samples=samples,
+                      wall_s=time.perf_counter() - t0, exit_code=proc.returncode)
+
+
+def _orthosim_argv(*args: str | Path) -> list[str]:
+    return [sys.executable, "-c", "from orthosim.cli import entry; entry()", *map(str, args)]
+
+
+def _case_with_steps(case: Path, steps: int, folder: Path) -> Path:
+    """A copy of `case` in `folder` whose treatment lasts `steps` steps of its own length (mesh folders made absolute)."""
+    import tomli_w
+
+    from orthosim.exchange.case import load_case
+
+    loaded = load_case(case)  # validated first: a bad case is the bench's error, not a child's
+    raw = tomllib.loads(Path(case).read_text())
+    raw.setdefault("treatment", {})["duration_days"] = steps * loaded.step_days
+    model = raw.get("model", {})
+    if "folder" in model:
+        model["folder"] = ([str(f) for f in loaded.model.folders] if isinstance(model["folder"], list)
+                           else str(loaded.model.folder))
+    out = folder / f"{Path(case).stem}_{steps}_steps.toml"
+    out.write_text(tomli_w.dumps(raw))
+    return out
+
+
+def memory_timings(case: str | Path, *, steps: int = 10_000, frames: int = 2_000, size: tuple[int, int] = (640, 480),
+                   work_dir: str | Path | None = None) -> dict:
+    """The bench's `memory` record: peak MB of a `steps`-step run without rendering and of a run drawn
+    into at least `frames` frames at `size`, each `orthosim run` in a fresh child process."""
+    from orthosim.exchange.case import load_case
+
+    load_start = os.getloadavg()
+    with tempfile.TemporaryDirectory(prefix="orthosim-memory-", dir=work_dir) as tmp:
+        tmp = Path(tmp)
+        long_case = _case_with_steps(Path(case), steps, tmp)
+        env = {**os.environ, "PYOPENGL_PLATFORM": os.environ.get("PYOPENGL_PLATFORM", "osmesa")}
+        no_render = measure_peak_memory(_orthosim_argv("run", long_case, "--out", tmp / "no_render", "--no-render",
+                                                       "--quiet"), env=env)
+        case_steps = load_case(case).steps
+        per_step = max(1, math.ceil((frames - 1) / case_steps))
+        drawn_frames = 1 + case_steps * per_step
+        rendered = measure_peak_memory(_orthosim_argv("run", case, "--out", tmp / "render", "--frames-per-step",
+                                                      per_step, "--size", f"{size[0]}x{size[1]}", "--quiet"), env=env)
+    record = {
+        "run_10k_steps_no_render_mb": no_render.peak_mb,
+        "render_2000_frames_mb": rendered.peak_mb,
+        "target_mb": TARGET_MB,
+        "meets_target": {"run_10k_steps_no_render": no_render.exit_code == 0 and no_render.peak_mb < TARGET_MB,
+                         "render_2000_frames": rendered.exit_code == 0 and rendered.peak_mb < TARGET_MB},
+        "run_no_render": {"case": str(case), "steps": steps, **asdict(no_render)},
+        "render": {"case": str(case), "steps": case_steps, "frames_per_step": per_step, "frames": drawn_frames,
+                   "size": list(size), **asdict(rendered)},
+        "run_10k_steps_no_render_rss_mb": no_render.tree_rss_sampled_peak_mb,
+        "render_2000_frames_rss_mb": rendered.tree_rss_sampled_peak_mb,
+        "render_2000_frames_pss_mb": rendered.tree_pss_sampled_peak_mb,
+        "measure": rendered.peak_measure,
+        "how": "orthosim run in a fresh child process; peak of the distinct physical pages resident in its process "
+               "tree (each page once: /proc/PID/pagemap; PSS where page frames are hidden), at least the largest "
+               "VmHWM of one of its processes; the summed RSS (shared pages counted once per process) and the "
+               "summed PSS beside it",
+        "load_average_start": list(load_start),
+        "load_average_end": list(os.getloadavg()),
+    }
+    return record

@@ -1,0 +1,46 @@
+"""The posed teeth of chosen steps as 3D files for Blender, MeshLab or Open3D (through trimesh).
+
+    export_scenes(dentition, records, extracted, out_dir / "scene", "glb")
+
+glb: one binary glTF scene per step, `step_NNNNN.glb`, one node per present tooth named
+`tooth_<FDI>` whose mesh is in the tooth's local frame and whose transform is the tooth's pose at
+that step (so a viewer shows the arch and keeps each tooth its own object). glTF's unit is the
+metre by convention; coordinates are written as they are, in millimetres (arch frame: y up, +z
+anterior), as dental CAD tools expect; scale by 0.001 on import for metric scenes.
+ply: PLY holds one mesh, so each step is a folder `step_NNNNN/` of `tooth_<FDI>.ply`, each posed
+in the arch frame (mm). Extracted teeth are left out.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterable
+
+from orthosim.storage.atomic import write_bytes
+
+
+def export_scenes(dentition, records: Iterable, extracted: set[int], out_dir: str | Path, fmt: str) -> list[Path]:
+    """Write each record's posed teeth (records: anything with `step` and `poses` {FDI: (4, 4) mm});
+    returns the files written."""
+    import trimesh
+
+    out_dir = Path(out_dir)
+    written: list[Path] = []
+    for record in records:
+        teeth = [n for n in dentition.fdis if n not in extracted]
+        if fmt == "glb":
+            scene = trimesh.Scene()
+            for n in teeth:
+                scene.add_geometry(dentition.teeth[n].mesh, node_name=f"tooth_{n}", geom_name=f"tooth_{n}",
+                                   transform=record.poses[n])
+            path = out_dir / f"step_{record.step:05d}.glb"
+            write_bytes(path, scene.export(file_type="glb"))
+            written.append(path)
+        elif fmt == "ply":
+            for n in teeth:
+                path = out_dir / f"step_{record.step:05d}" / f"tooth_{n}.ply"
+                write_bytes(path, dentition.teeth[n].world_mesh(record.poses[n]).export(file_type="ply"))
+                written.append(path)
+        else:
+            raise ValueError(f"unknown scene format {fmt!r}")
+    return written

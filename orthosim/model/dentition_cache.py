@@ -1,0 +1,174 @@
+"""On-disk cache of built dentitions, so that a run starts from its teeth in milliseconds.
+
+Building the parametric model takes seconds to tens of seconds (tooth shapes, boolean crown
+centres, FCL contact searches, the upper-arch fit), and loading real teeth repairs and validates
+every mesh; a run, a batch variant or a test that asks for the same model again should not pay for
+that. The cache is keyed like the sphere-tree cache (`orthosim.spheretree.cache`): a SHA-256 of the
+model's parameters, the bytes of every input file (meshes, axes), `BUILDER_VERSION` (bumped when a
+builder changes its output on purpose) and the source text of the modules that build dentitions
+(so an edited builder never serves a stale model). An entry is one .npz of plain arrays and a JSON
+header (no pickle), written atomically: two processes building the same model at once both end
+with a whole file. An entry that cannot be read is a miss, reported in one warning line, rebuilt
+and overwritten; a folder that cannot be written costs a rebuild next time, never a failure.
+Warnings the build raised (mesh repairs) are stored with it and raised again on every load.
+
+The folder is `$ORTHOSIM_CACHE/dentitions` when that is set, else `~/.cache/orthosim/dentitions`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import json
+import os
+import warnings
+import zipfile
+from pathlib import Path
+from typing import Callable, Iterable, Mapping
+
+import numpy as np
+
+from orthosim.storage.atomic import atomic_path
+from orthosim.storage.sourcedigest import source_digest
+
+BUILDER_VERSION = 1
+# Modules whose code decides what a built dentition holds: their source is part of the key.
+_BUILDER_MODULES = ("model/anatomy", "model/archform", "model/dentition", "model/fdi", "collision/interpenetration",
+                    "exchange/meshload", "geometry/meshrefine", "analysis/occlusion", "exchange/openfulljaw",
+                    "model/parametric", "exchange/scanfolders", "exchange/scanframe", "model/tooth", "model/toothshape",
+                    "geometry/meshquery", "geometry/penetration")
+_PACKAGE = Path(__file__).resolve().parents[1]  # orthosim/
+
+
+class DentitionCacheWarning(UserWarning):
+    """A cached dentition could not be read; it is rebuilt."""
+
+
+def default_cache_dir() -> Path:
+    env = os.environ.get("ORTHOSIM_CACHE")
+    return (Path(env) if env else Path.home() / ".cache" / "orthosim") / "dentitions"
+
+
+def _builder_source_digest() -> str:
+    return source_digest(_PACKAGE, _BUILDER_MODULES)
+
+
+def parametric_parameters(resolution: int | str, third_molars: bool, diastema_mm: float) -> dict:
+    """The key parameters of the parametric model (`orthosim.model.parametric.parametric_dentition`)."""
+    return {"kind": "parametric", "resolution": resolution, "third_molars": bool(third_molars),
+            "diastema_mm": float(diastema_mm)}
+
+
+def cache_key(parameters: Mapping, input_files: Iterable[str | Path] = ()) -> str:
+    """Hex SHA-256 of the model parameters (JSON), the input files' bytes and the builder (version, code)."""
+    h = hashlib.sha256()
+    h.update(json.dumps(parameters, sort_keys=True, default=str).encode())
+    for path in sorted(Path(p) for p in input_files):
+        h.update(path.name.encode())
+        h.update(hashlib.sha256(path.read_bytes()).digest())
+    h.update(f"|v{BUILDER_VERSION}|{_builder_source_digest()}".encode())
+    return h.hexdigest()
+
+
+def entry_path(parameters: Mapping, input_files: Iterable[str | Path] = (), cache_dir: str | Path | None = None) -> Path:
+    folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    return folder / f"{cache_key(parameters, input_files)}.npz"
+
+
+def _jsonable(obj):
+    """What the JSON header holds of `Dentition.info`: arrays as lists, paths and keys as strings."""
+    return json.loads(json.dumps(obj, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
+
+
+def save_dentition(dent, path: str | Path, raised: list[tuple[str, str]] = ()) -> None:
+    """Write a dentition as .npz (atomically): per tooth its mesh, face parts, landmarks and frame."""
+    arrays: dict[str, np.ndarray] = {}
+    teeth = []
+    for n, t in dent.teeth.items():
+        arrays[f"{n}_vertices"] = np.asarray(t.mesh.vertices, np.float64)
+        arrays[f"{n}_faces"] = np.asarray(t.mesh.faces, np.int64)
+        arrays[f"{n}_face_part"] = np.asarray(t.face_part)
+        arrays[f"{n}_crown_center"] = np.asarray(t.crown_center, np.float64)
+        arrays[f"{n}_apex"] = np.asarray(t.apex, np.float64)
+        arrays[f"{n}_rest_pose"] = np.asarray(t.rest_pose, np.float64)
+        for name, p in t.landmarks.items():
+            arrays[f"{n}_landmark_{name}"] = np.asarray(p, np.float64)
+        teeth.append({"fdi": n, "source": t.source, "landmarks": list(t.landmarks)})
+    header = {"description": dent.description, "info": _jsonable(dent.info), "teeth": teeth,
+              "warnings": [list(w) for w in raised]}
+    arrays["header"] = np.array(json.dumps(header))
+    with atomic_path(path, suffix=".npz") as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+
+
+def load_dentition(path: str | Path):
+    """(dentition, warnings raised when it was built) from a file written by `save_dentition`."""
+    import trimesh
+
+    from orthosim.model.dentition import Dentition
+    from orthosim.model.tooth import Tooth
+
+    with np.load(path, allow_pickle=False) as z:
+        header = json.loads(str(z["header"]))
+        teeth = {}
+        for entry in header["teeth"]:
+            n = int(entry["fdi"])
+            mesh = trimesh.Trimesh(z[f"{n}_vertices"], z[f"{n}_faces"], process=False)
+            teeth[n] = Tooth(fdi=n, mesh=mesh, face_part=z[f"{n}_face_part"], crown_center=z[f"{n}_crown_center"],
+                             apex=z[f"{n}_apex"], rest_pose=z[f"{n}_rest_pose"],
+                             landmarks={name: z[f"{n}_landmark_{name}"] for name in entry["landmarks"]},
+                             source=entry["source"])
+    return Dentition(teeth, header["description"], header["info"]), [tuple(w) for w in header["warnings"]]
+
+
+def _warning_class(qualified: str) -> type[Warning]:
+    module, _, name = qualified.rpartition(".")
+    try:
+        cls = getattr(importlib.import_module(module), name)
+        return cls if isinstance(cls, type) and issubclass(cls, Warning) else UserWarning
+    except (ImportError, AttributeError, ValueError):
+        return UserWarning
+
+
+def _replay(raised: Iterable[tuple[str, str]]) -> None:
+    for category, message in raised:
+        warnings.warn(message, _warning_class(category), stacklevel=3)
+
+
+def is_cached(parameters: Mapping, input_files: Iterable[str | Path] = (), cache_dir: str | Path | None = None) -> bool:
+    """Whether an entry for this model is on disk (it may still turn out unreadable)."""
+    return entry_path(parameters, input_files, cache_dir).is_file()
+
+
+def cached_dentition(parameters: Mapping, build: Callable[[], object], input_files: Iterable[str | Path] = (),
+                     cache_dir: str | Path | None = None):
+    """The dentition `build()` makes for these parameters and input files, through the disk cache.
+
+    A hit returns the stored teeth (bit-identical arrays) and raises the build's warnings again. A
+    miss builds, stores and returns what a later hit will return: `info` as JSON keeps it (arrays
+    as lists, keys as strings), so a run's outputs do not depend on whether the cache was warm.
+    """
+    from orthosim.model.dentition import Dentition
+
+    input_files = list(input_files)
+    path = entry_path(parameters, input_files, cache_dir)
+    if path.is_file():
+        try:
+            dent, raised = load_dentition(path)
+        except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile, json.JSONDecodeError) as err:
+            warnings.warn(f"dentition cache entry {path} is unreadable ({type(err).__name__}); rebuilding it",
+                          DentitionCacheWarning, stacklevel=2)
+        else:
+            _replay(raised)
+            return dent
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        built = build()
+    raised = [(f"{w.category.__module__}.{w.category.__qualname__}", str(w.message)) for w in caught]
+    try:
+        save_dentition(built, path, raised)
+    except OSError:
+        pass  # a read-only or full cache folder costs a rebuild next time, never a failure
+    _replay(raised)
+    return Dentition(built.teeth, built.description, _jsonable(built.info))

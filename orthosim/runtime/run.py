@@ -1,0 +1,434 @@
+"""One run of a case, in phases: validate, model, trees, simulate (and draw), write.
+
+    result = run_case(case_path, out_dir, RunOptions(detector="discrete", views=("frontal",)), draw=draw)
+
+`run_case` is the whole of `orthosim run` as one function with explicit arguments (a batch calls it
+once per variant; a wrapper may enclose it to stage the output folder). Its phases, in order:
+  1. validate: the case file and every option, before anything heavy is imported or built, so a
+     typo fails at once with one line;
+  2. model: the teeth (from the dentition cache when warm, `orthosim.model.dentition_cache`) and each
+     tooth's mechanics;
+  3. trees: the collision model: sphere trees (cached on disk) and the exact meshes' BVHs;
+  4. simulate: the movement simulation; when drawing, it runs in a child process
+     (`orthosim.runtime.background`) that sends its records to this one, which draws and encodes them on
+     the other core (`draw`, given by the CLI: the core never imports the renderer);
+  5. write: metrics.json (only what the case and detector determine, byte-identical run to run),
+     distances.csv, distances_per_step.csv, the exported scenes, and last run.json
+     (`orthosim.runtime.runfolder`: what varies per run or machine: timings, frame rates, GL renderer,
+     paths, options), which marks the run finished.
+The child builds the model and trees once and computes the report itself; this process only loads
+the teeth it draws, so nothing is built twice. Phases 2 and 3 are reported by the child as they end.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable, Iterator
+
+from orthosim.errors import OrthosimError
+
+MIN_ANIMATION_S = 5.0  # default animation length: at least this many seconds
+SCENE_FORMATS = ("glb", "ply")
+_STARTED = time.perf_counter()
+
+
+class OptionError(OrthosimError):
+    """A command-line option asks for something the run cannot do."""
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """What the user asked of a run, besides the case (all validated by `validate`).
+
+    frames_per_step / seconds: animation frames per simulation step, or the animation's length in
+        seconds (at `fps`); neither: at least MIN_ANIMATION_S seconds.
+    export_scene: "glb" or "ply": the posed teeth at `export_steps` (default: first and last step).
+    verbosity: 0 quiet (errors and warnings only), 1 normal (phase lines and bars on a terminal,
+        the summary line), 2 verbose (phase lines wherever the output goes).
+    """
+
+    detector: str | None = None
+    render: bool = True
+    views: tuple[str, ...] = ("frontal",)
+    size: tuple[int, int] = (640, 480)
+    gif: bool = False
+    alpha: bool = False
+    hide_roots: bool = False
+    contact_faces: bool = False
+    contact_faces_exact: bool = False  # colour only the triangles within the touch tolerance (exact)
+    labels: bool = False  # FDI numbers on the crowns in the frames
+    overlay: bool = True  # case, detector, day N of M and the colour legend drawn on the frames
+    frames_per_step: int | None = None
+    seconds: float | None = None
+    fps: int = 30
+    split_views: bool = False
+    export_scene: str | None = None
+    export_steps: tuple[int, ...] | None = None
+    simulate_in_process: bool = False  # batch workers: one per core already, so no simulation child per run
+    single_core: bool = False  # batch workers: also simulate, draw and encode on one thread, ffmpeg on one (implies simulate_in_process)
+    verbosity: int = 1
+
+
+@dataclass(frozen=True)
+class PhaseDone:
+    """A phase of the simulation side ended (sent by the child among its step records)."""
+
+    name: str
+    seconds: float
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """The simulation side's last item: the run's report, ready to write."""
+
+    metrics: dict
+    distances_csv: str
+    model_files: dict  # for run.json: the model's description and source files
+
+
+@dataclass
+class RunLog:
+    """Phase lines and the summary, as the options and the output (terminal or not) ask."""
+
+    verbosity: int = 1
+    tty: bool = field(default_factory=lambda: sys.stderr.isatty())
+    timings_s: dict = field(default_factory=dict)
+
+    @property
+    def phases_shown(self) -> bool:
+        return self.verbosity >= 2 or (self.verbosity == 1 and self.tty)
+
+    @property
+    def bars_shown(self) -> bool:
+        return self.verbosity >= 1 and self.tty
+
+    def phase(self, name: str, seconds: float, detail: str = "") -> None:
+        self.timings_s[name] = round(self.timings_s.get(name, 0.0) + seconds, 4)
+        if self.phases_shown:
+            print(f"{name:<10} {seconds:7.2f} s  {detail}".rstrip(), file=sys.stderr, flush=True)
+
+    def note(self, text: str) -> None:
+        if self.phases_shown:
+            print(text, file=sys.stderr, flush=True)
+
+    def summary(self, text: str) -> None:
+        if self.verbosity >= 1:
+            print(text, flush=True)
+
+
+def process_age_s() -> float:
+    """Seconds since this process started (Linux /proc); since orthosim was imported elsewhere."""
+    try:
+        import os
+
+        ticks = int(Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()[19])
+        uptime = float(Path("/proc/uptime").read_text().split()[0])
+        return uptime - ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return time.perf_counter() - _STARTED
+
+
+# ------------------------------------------------------------------------------------------ 1. validate
+
+
+def validate(case_path: str | Path, out_dir: str | Path, options: RunOptions, check_view: Callable[[str], str] | None = None):
+    """(case, options with canonical view names and the detector filled in); one-line errors before any work.
+
+    check_view: the renderer's view-name check (the core does not import the renderer).
+    """
+    from orthosim.exchange.case import DETECTORS, load_case
+
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise OptionError(out_dir, None, "exists and is not a folder", "give --out a folder path")
+    views = tuple(options.views or ("frontal",))
+    if check_view is not None:
+        views = tuple(check_view(v) for v in views)
+    if len(set(views)) != len(views):
+        raise OptionError("--view", ", ".join(views), "names a view twice", "give each view once")
+    if options.frames_per_step is not None and options.seconds is not None:
+        raise OptionError("--frames-per-step", str(options.frames_per_step), "and --seconds both set the animation's length",
+                          "give one of them")
+    if options.seconds is not None and not (0 < options.seconds <= 3600):
+        raise OptionError("--seconds", f"{options.seconds:g}", "is not a length from 0 to 3600 s", "e.g. --seconds 10")
+    if not 1 <= options.fps <= 120:
+        raise OptionError("--fps", str(options.fps), "is not 1 to 120 frames per second", "e.g. --fps 30")
+    if options.export_scene is not None and options.export_scene not in SCENE_FORMATS:
+        raise OptionError("--export-scene", options.export_scene, "is not a scene format", f"use one of {', '.join(SCENE_FORMATS)}")
+    # the options above stand alone; those below need the case (a mesh model's folders are checked too)
+    case = load_case(case_path)
+    detector = options.detector or case.detector
+    if detector not in DETECTORS:
+        raise OptionError("--detector", detector, "is not a detector", f"use one of {', '.join(DETECTORS)}")
+    steps = options.export_steps
+    if steps is not None:
+        bad = [s for s in steps if not 0 <= s <= case.steps]
+        if bad:
+            raise OptionError("--export-steps", str(bad[0]), f"is not a step of this case (0 to {case.steps})",
+                              f"give steps from 0 to {case.steps}")
+    return case, RunOptions(**{**asdict(options), "detector": detector, "views": views})
+
+
+def frames_per_step(options: RunOptions, steps: int) -> int:
+    """Animation frames per simulation step: as asked, or enough for `seconds` (default MIN_ANIMATION_S)
+    at `fps`; the animation has 1 + steps * frames_per_step frames."""
+    if options.frames_per_step is not None:
+        return options.frames_per_step
+    seconds = options.seconds if options.seconds is not None else MIN_ANIMATION_S
+    return max(1, math.ceil((seconds * options.fps - 1) / max(steps, 1)))
+
+
+# ------------------------------------------------------------------------- 2-4. model, trees, simulate
+
+
+def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, shared: bool = False) -> Iterator:
+    """The simulation side of a run: PhaseDone("model"), PhaseDone("trees"), one StepRecord per step,
+    then the RunResult. Picklable arguments: it runs in the child process when the run draws.
+    The per-step detail (steps.jsonl, distances_per_step.csv) streams into out_dir as it comes.
+    shared: `dentition` is drawn meanwhile by another thread of this process (its meshes' caches
+    are then left alone)."""
+    from orthosim.runtime.background import release_compiler_pages, release_freed_heap
+    from orthosim.collision import CollisionModel, ExactQueries
+    from orthosim.analysis.metrics import occlusion_summary
+    from orthosim.movement.report import DISTANCES_PER_STEP_FILE, STEPS_FILE, RunReport
+    from orthosim.movement.simulation import MovementModel, simulate
+
+    t0 = time.perf_counter()
+    cached = dentition is None and case.dentition_is_cached()
+    dent = dentition if dentition is not None else case.build_dentition()
+    t1 = time.perf_counter()
+    collision = CollisionModel.from_dentition(dent)
+    release_compiler_pages()  # numba's functions are loaded (the sphere trees'), before the BVHs' memory comes
+    # a tooth's whole-mesh BVH is built when a step first needs it (most steps ask patches only:
+    # case 1 needs 8 of its 24 teeth's), not for every tooth up front: ~55 MB less in a drawn run
+    queries = ExactQueries(collision)
+    t2 = time.perf_counter()
+    model = MovementModel.build(case, dent, collision=collision)
+    if not shared:
+        dent.drop_mesh_caches()  # the meshes' derived arrays the build asked for (~30 MB on 28 teeth)
+    release_freed_heap()  # what building the model freed, before a run of any length
+    t3 = time.perf_counter()
+    how = "from the cache" if cached else ("given" if dentition is not None else "built")
+    yield PhaseDone("model", (t1 - t0) + (t3 - t2), f"{dent.description}, {how}")
+    yield PhaseDone("trees", t2 - t1, f"{len(collision.bodies)} sphere trees")
+    out_dir = Path(out_dir)
+    report = RunReport(model, detector, steps_file=out_dir / STEPS_FILE, distances_file=out_dir / DISTANCES_PER_STEP_FILE)
+    depth_kernels = False
+    for record in report.collect(simulate(model, detector, queries=queries)):
+        yield record
+        if record.step == 1:  # and what the first steps compiled: numba's compiler lies idle from now on
+            release_compiler_pages()
+        elif not depth_kernels and "orthosim.geometry.penetration" in sys.modules:
+            # the depth kernels load on a run's first intersecting pair, whenever that comes, and
+            # loading them touches the compiler's pages again
+            depth_kernels = True
+            release_compiler_pages()
+    report.finish_streams(out_dir)
+    metrics = report.metrics()
+    metrics["model"] = model_summary(dent)
+    metrics["occlusion"] = occlusion_summary(dent)  # the initial model's
+    metrics["occlusion_final"] = occlusion_summary(dent, {n: report.last.poses[n] for n in dent.fdis})
+    yield RunResult(metrics, report.distances_csv(), model_files(dent))
+
+
+_PATH_KEYS = ("source", "files", "axes_file")  # model info that names files on this machine: run.json's
+
+
+def model_summary(dent) -> dict:
+    """What metrics.json says of the model: its kind and build figures, without machine paths."""
+    return {"teeth": len(dent.teeth), **{k: v for k, v in dent.info.items() if k not in _PATH_KEYS}}
+
+
+def model_files(dent) -> dict:
+    """What run.json says of the model: its description and the files it was read from."""
+    return {"description": dent.description, **{k: v for k, v in dent.info.items() if k in _PATH_KEYS}}
+
+
+class _Split:
+    """Step records out of a simulation stream; phases reported to the log, the result kept."""
+
+    def __init__(self, items: Iterable, log: RunLog, on_record: Callable | None = None):
+        self.items, self.log, self.on_record = items, log, on_record
+        self.result: RunResult | None = None
+        self.first_step_s: float | None = None
+        self.simulation_started = time.perf_counter()  # reset when the trees phase ends
+        self.steps = 0
+
+    def __iter__(self):
+        for item in self.items:
+            if isinstance(item, PhaseDone):
+                self.log.phase(item.name, item.seconds, item.detail)
+                self.simulation_started = time.perf_counter()
+            elif isinstance(item, RunResult):
+                self.result = item
+            else:
+                if self.first_step_s is None:
+                    self.first_step_s = process_age_s()
+                    if self.log.verbosity >= 2:
+                        self.log.note(f"first step after {self.first_step_s:.2f} s")
+                self.steps += 1
+                if self.on_record is not None:
+                    self.on_record(item)
+                yield item
+
+
+# ------------------------------------------------------------------------------------------ the run
+
+_SIMULATION_MODULES = ("orthosim.runtime.run", "orthosim.collision", "orthosim.movement.simulation")
+# what both sides of a drawn run use (the teeth: numpy, scipy, trimesh and FCL, which trimesh loads),
+# imported before the fork so that the two processes share it; the step's own (the collision
+# package, numba) only the simulation child imports, and the renderer only this process
+_SHARED_MODULES = ("orthosim.runtime.run", "orthosim.model.dentition", "orthosim.analysis.metrics", "orthosim.movement.records")
+
+
+def _import_modules(names) -> None:
+    """Import `names` now (before a fork: the child shares them)."""
+    import importlib
+
+    for name in names:
+        importlib.import_module(name)
+
+
+def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = RunOptions(),
+             draw: Callable | None = None, check_view: Callable[[str], str] | None = None,
+             shown_dir: str | Path | None = None, summary_to: Callable[[str], None] | None = None) -> dict:
+    """Run one case into out_dir (see the module doc); returns the run record (run.json).
+
+    draw(dentition, records, out_dir, options, *, extracted, per_step, total, progress, case) -> dict:
+    renders the step records into frames and animations and returns what it measured and wrote;
+    None, or options.render False: simulate only.
+    shown_dir: the folder the run is meant for, named in run.json and the summary, when out_dir is
+    a private staging folder that will replace it (`orthosim.runtime.outputfolder`). summary_to: receives
+    the summary line (when the verbosity shows it) instead of printing it, so that a caller can
+    print it once the folder is in place.
+    """
+    from contextlib import ExitStack
+
+    from orthosim.storage.atomic import write_json, write_text
+    from orthosim.runtime.runfolder import write_run_record
+
+    log = RunLog(options.verbosity)
+    t = time.perf_counter()
+    case, options = validate(case_path, out_dir, options, check_view if options.render else None)
+    out_dir = Path(out_dir)
+    drawing = options.render and draw is not None
+    per_step = frames_per_step(options, case.steps)
+    n_frames = 1 + case.steps * per_step
+    log.phase("validate", time.perf_counter() - t, f"{case.name}: {case.steps} steps of {case.step_days:g} days, "
+                                                   f"{options.detector} detector")
+    if drawing:
+        log.note(f"{'':10} {'':9}  {n_frames} frames at {options.fps} fps ({n_frames / options.fps:.1f} s), "
+                 f"views {', '.join(options.views)}, {options.size[0]}x{options.size[1]}")
+    wanted = set(options.export_steps if options.export_steps is not None else (0, case.steps))
+    posed: dict[int, object] = {}
+
+    def keep(record):
+        if options.export_scene and record.step in wanted:
+            posed[record.step] = record
+
+    rendered: dict = {}
+    with ExitStack() as stack:
+        if not drawing:
+            split = _Split(simulation_stream(case, options.detector, out_dir), log, keep)
+            for _ in _bar(split, case.steps + 1, log):
+                pass
+            dent = None
+        else:
+            if options.simulate_in_process or options.single_core:
+                dent = case.build_dentition()
+                split, where = _Split(simulation_stream(case, options.detector, out_dir, dentition=dent, shared=True), log, keep), "in this process"
+            else:
+                from orthosim.runtime.background import ChildProcessIterator, fork_is_safe
+
+                dent = None
+                if fork_is_safe():
+                    # fork: the child starts as a copy of this process, with the imports both
+                    # sides use done and the teeth loaded once; the step's own imports (numba,
+                    # the collision package) come after the fork in the child only, the renderer
+                    # (and its OpenGL context) in this process only
+                    t = time.perf_counter()
+                    _import_modules(_SHARED_MODULES)
+                    log.phase("imports", time.perf_counter() - t, "numpy, scipy, trimesh, FCL: once, for both processes")
+                    t = time.perf_counter()
+                    cached = case.dentition_is_cached()
+                    dent = case.build_dentition()
+                    dent.drop_mesh_caches()  # a build's leftovers: each process derives only what it uses
+                    log.phase("model", time.perf_counter() - t,
+                              f"{dent.description}, {'from the cache' if cached else 'built and cached'}")
+                if dent is not None and fork_is_safe():  # still no thread running after the build
+                    child = stack.enter_context(ChildProcessIterator(ignore_warnings=True, start_method="fork"))
+                    child.submit(simulation_stream, case, options.detector, out_dir, dentition=dent)
+                else:
+                    child = stack.enter_context(ChildProcessIterator(ignore_warnings=True, preload=_SIMULATION_MODULES))
+                    if dent is None and not case.dentition_is_cached():  # built once, here, and cached for the child
+                        t = time.perf_counter()
+                        dent = case.build_dentition()
+                        log.phase("model", time.perf_counter() - t, f"{dent.description}, built and cached")
+                    given = dent if dent is not None and not case.dentition_is_cached() else None  # unwritable cache
+                    child.submit(simulation_stream, case, options.detector, out_dir, dentition=given)
+                    dent = dent or case.build_dentition()
+                split, where = _Split(child, log, keep), "beside the drawing"
+            rendered = draw(dent, split, out_dir, options, extracted=frozenset(case.extractions), per_step=per_step,
+                            total=n_frames, progress=log.bars_shown, case=case)
+            log.phase("simulate", time.perf_counter() - split.simulation_started - rendered.get("encode_s", 0.0),
+                      f"{split.steps} steps, {rendered.get('frames', 0)} frames drawn (simulation {where})")
+            if "encode_s" in rendered:
+                log.phase("encode", rendered["encode_s"], ", ".join(Path(p).name for p in rendered.get("outputs", {}).values()))
+    if split.result is None:
+        raise RuntimeError("the simulation ended without its report")
+    if not drawing:
+        log.phase("simulate", time.perf_counter() - split.simulation_started, f"{split.steps} steps")
+    t = time.perf_counter()
+    result = split.result
+    write_json(out_dir / "metrics.json", result.metrics)
+    write_text(out_dir / "distances.csv", result.distances_csv)
+    scenes = []
+    if options.export_scene:
+        from orthosim.exchange.scene_export import export_scenes
+
+        dent = dent or case.build_dentition()
+        scenes = export_scenes(dent, [posed[s] for s in sorted(posed)], set(case.extractions), out_dir / "scene",
+                               options.export_scene)
+    log.phase("write", time.perf_counter() - t, "metrics.json, distances.csv, distances_per_step.csv"
+              + (f", {len(scenes)} scene files" if scenes else ""))
+    log.timings_s["first_step_after_start"] = round(split.first_step_s or 0.0, 4)
+    log.timings_s["total"] = round(process_age_s(), 4)
+    extra = {
+        "out_dir": str(Path(shown_dir or out_dir).resolve()),
+        "options": {k: v for k, v in asdict(options).items() if k != "verbosity"},
+        "frames_per_step": per_step,
+        "timings_s": log.timings_s,
+        "model_files": result.model_files,
+        "render": {k: v for k, v in rendered.items() if k != "encode_s"} if rendered else None,
+        "scenes": [str(Path(p).relative_to(out_dir)) for p in scenes],  # relative: out_dir may be a staging folder
+    }
+    record = write_run_record(out_dir, case.path, options.detector, extra)  # last: marks the run finished
+    m = result.metrics
+    start = m.get("initial_interpenetration") or []
+    initial = (f" beyond the {start[0]['mm']:.3f} mm the model starts with (teeth {start[0]['pair'][0]}-{start[0]['pair'][1]}"
+               f"{f' and {len(start) - 1} more pairs' if len(start) > 1 else ''})" if start else "")
+    line = (f"{case.name} ({options.detector}): {m['steps']} steps, total distance "
+            f"{m['total_distance_mm']['initial']:.2f} -> {m['total_distance_mm']['final']:.2f} mm, "
+            f"{m['collisions']} collisions, max penetration {m['max_penetration_mm']:.3f} mm{initial} "
+            f"-> {Path(shown_dir or out_dir)}/metrics.json")
+    if summary_to is not None and options.verbosity >= 1:
+        summary_to(line)
+    else:
+        log.summary(line)
+    return record
+
+
+def _bar(items: Iterable, total: int, log: RunLog) -> Iterator:
+    """A tqdm bar over the steps when the log shows bars (a terminal), else the items as they are."""
+    if not log.bars_shown:
+        yield from items
+        return
+    from tqdm import tqdm
+
+    with tqdm(items, total=total, unit="step", desc="simulate", leave=False, dynamic_ncols=True) as bar:
+        yield from bar

@@ -1,0 +1,64 @@
+"""A run folder: what `orthosim run` leaves in `--out`, and how readers tell a finished run.
+
+`run.json` is written last, after every other output of the run. It names the orthosim version
+that wrote the folder, the case file (and its SHA-256), the detector, and `complete: true`. A
+folder without it, or whose `run.json` says otherwise, holds no finished run; reports, batches and
+regression tools read a run only through `read_finished_run`, which refuses such folders, and
+folders written by another orthosim version, with one line that names the fix.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+from orthosim import __version__
+from orthosim.storage.atomic import write_json
+from orthosim.errors import OrthosimError
+
+RUN_FILE = "run.json"
+
+
+class RunFolderError(OrthosimError):
+    """A run folder is missing, unfinished, unreadable or from another orthosim version."""
+
+
+def file_sha256(path: str | Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def write_run_record(out_dir: str | Path, case_file: str | Path, detector: str, extra: dict | None = None) -> dict:
+    """Mark `out_dir` as a finished run: write run.json (atomically) as the run's last output."""
+    record = {
+        "orthosim_version": __version__,
+        "complete": True,
+        "case_file": str(case_file),
+        "case_sha256": file_sha256(case_file),
+        "detector": detector,
+        **(extra or {}),
+    }
+    write_json(Path(out_dir) / RUN_FILE, record)
+    return record
+
+
+def read_finished_run(run_dir: str | Path) -> dict:
+    """The run.json of a finished run written by this orthosim version; RunFolderError otherwise."""
+    run_dir = Path(run_dir)
+    path = run_dir / RUN_FILE
+    rerun = f"run it again: orthosim run CASE --out {run_dir}"
+    if not run_dir.is_dir():
+        raise RunFolderError(run_dir, None, "is not a run folder (no such folder)", "give a folder that `orthosim run` wrote")
+    if not path.is_file():
+        raise RunFolderError(run_dir, RUN_FILE, "is missing: the run did not finish (or the folder is not a run)", rerun)
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise RunFolderError(path, None, f"is unreadable ({err.__class__.__name__})", rerun) from None
+    if not isinstance(record, dict) or record.get("complete") is not True:
+        raise RunFolderError(path, "complete", "does not mark a finished run", rerun)
+    version = record.get("orthosim_version")
+    if version != __version__:
+        raise RunFolderError(path, "orthosim_version", f"the run was written by orthosim {version}, this is {__version__}",
+                             rerun)
+    return record

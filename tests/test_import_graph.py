@@ -1,0 +1,102 @@
+"""The folder tree is the architecture: packages by role, no import cycles, the core free of drawing.
+
+Every module of the three installed packages is imported in a fresh interpreter, and the graph of
+imports read from their source (imports inside functions included, since those are how a cycle
+hides) must have no cycle. The core (`orthosim`, but for the CLI, the composition root) never
+imports `orthosim_render`, `orthosim_bench` or OpenGL; `orthosim_render` never imports the
+benchmarks.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+import networkx as nx
+
+ROOT = Path(__file__).resolve().parents[1]
+FOLDERS = {"orthosim": ROOT / "orthosim", "orthosim_render": ROOT / "render", "orthosim_bench": ROOT / "bench"}
+# the package faces at the top of orthosim/: its __init__, the CLI (composition root) and the errors
+TOP_LEVEL_MODULES = {"__init__.py", "cli.py", "errors.py"}
+COMPOSITION_ROOT = "orthosim.cli"
+
+
+def _modules() -> dict[str, Path]:
+    found = {}
+    for name, folder in FOLDERS.items():
+        for path in folder.rglob("*.py"):
+            parts = list(path.relative_to(folder).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            found[".".join([name, *parts])] = path
+    return found
+
+
+def _import_graph() -> nx.DiGraph:
+    modules = _modules()
+    graph = nx.DiGraph()
+    graph.add_nodes_from(modules)
+    for name, path in modules.items():
+        is_package = path.name == "__init__.py"
+        package = name if is_package else name.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            targets = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    anchor = package.split(".")[: len(package.split(".")) - (node.level - 1)]
+                    base = ".".join(anchor + ([base] if base else []))
+                targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in node.names]
+            for target in targets:
+                while target and target not in modules and "." in target:
+                    target = target.rpartition(".")[0]
+                if target in modules and target != name:
+                    graph.add_edge(name, target)
+    return graph
+
+
+def test_orthosim_has_no_top_level_module_but_its_faces():
+    top = {p.name for p in FOLDERS["orthosim"].glob("*.py")}
+    assert top <= TOP_LEVEL_MODULES, f"modules at the top of orthosim/ that belong in a role package: {sorted(top - TOP_LEVEL_MODULES)}"
+
+
+def test_the_import_graph_has_no_cycle():
+    graph = _import_graph()
+    # a package's __init__ importing its own submodules is how a package shows its face, not a cycle
+    for u, v in list(graph.edges):
+        if v.startswith(u + "."):
+            graph.remove_edge(u, v)
+    cycles = [sorted(c) for c in nx.strongly_connected_components(graph) if len(c) > 1]
+    assert not cycles, f"import cycles: {cycles}"
+
+
+def test_the_core_never_imports_drawing_or_measurement():
+    graph = _import_graph()
+    offending = [(u, v) for u, v in graph.edges
+                 if u.startswith("orthosim.") and u != COMPOSITION_ROOT
+                 and (v.startswith("orthosim_render") or v.startswith("orthosim_bench"))]
+    assert not offending, f"core modules importing render or bench: {offending}"
+    offending = [(u, v) for u, v in graph.edges if u.startswith("orthosim_render") and v.startswith("orthosim_bench")]
+    assert not offending, f"render modules importing bench: {offending}"
+    for name, path in _modules().items():
+        if name.startswith("orthosim.") or name == "orthosim":
+            source = path.read_text()
+            assert "import OpenGL" not in source and "import pyrender" not in source, name
+
+
+def test_every_module_imports_in_a_fresh_interpreter():
+    names = sorted(_modules())
+    code = ("import importlib, sys\n"
+            "bad = []\n"
+            f"for n in {names!r}:\n"
+            "    try:\n        importlib.import_module(n)\n"
+            "    except Exception as e:\n        bad.append(f'{n}: {e!r}')\n"
+            "print('\\n'.join(bad)); sys.exit(1 if bad else 0)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert importlib.util.find_spec("render") is None or "site-packages" not in str(importlib.util.find_spec("render").origin)
