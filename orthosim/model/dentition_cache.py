@@ -34,7 +34,7 @@ from orthosim.storage.sourcedigest import source_digest
 BUILDER_VERSION = 1
 # Modules whose code decides what a built dentition holds: their source is part of the key.
 _BUILDER_MODULES = ("model/anatomy", "model/archform", "model/dentition", "model/fdi", "collision/interpenetration",
-                    "exchange/meshload", "geometry/meshrefine", "analysis/occlusion", "exchange/openfulljaw",
+                    "exchange/meshload", "exchange/meshfolder", "geometry/meshrefine", "analysis/occlusion", "exchange/openfulljaw",
                     "model/parametric", "exchange/scanfolders", "exchange/scanframe", "model/tooth", "model/toothshape",
                     "geometry/meshquery", "geometry/penetration")
 _PACKAGE = Path(__file__).resolve().parents[1]  # orthosim/

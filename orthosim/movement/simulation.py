@@ -49,7 +49,7 @@ from orthosim.exchange.case import Case, Load
 from orthosim.collision import (CollisionModel, CollisionRequest, Contacts, ExactQueries, candidate_pairs, contacts, detect_step,
                          interpolate_pose)
 from orthosim.model.dentition import Dentition
-from orthosim.collision.detectors import DETECTORS
+from orthosim.collision.detectors import DETECTORS, Detector, detector_named
 from orthosim.errors import CaseError
 from orthosim.collision.interpenetration import default_occlusal_slide_mm
 from orthosim.analysis.metrics import tooth_to_tooth_distances
@@ -257,7 +257,7 @@ class StepState:
     poses: Mapping[int, np.ndarray]
     touching: tuple[tuple[int, int], ...]
     rest_depths: Mapping[tuple[int, int], float]
-    detector: str
+    detector: Detector  # the run's (`orthosim.collision.detectors`): its capabilities steer the step
     queries: ExactQueries
     bite: frozenset[tuple[int, int]] = frozenset()
     centers: Mapping[int, np.ndarray] | None = None
@@ -298,8 +298,9 @@ def _touch_request(model: MovementModel) -> CollisionRequest:
     return CollisionRequest(all_leaf_pairs=True, touch_tolerance_mm=model.settings.touch_tolerance_mm)
 
 
-def initial_state(model: MovementModel, detector: str, queries: ExactQueries | None = None) -> tuple[StepState, StepRecord]:
-    """The state before any movement (rest poses) and its record (step 0)."""
+def initial_state(model: MovementModel, detector: str | Detector, queries: ExactQueries | None = None) -> tuple[StepState, StepRecord]:
+    """The state before any movement (rest poses) and its record (step 0); detector: a Detector or its name."""
+    detector = detector_named(detector)
     queries = queries or ExactQueries(model.collision)
     P = {n: np.asarray(T, float).copy() for n, T in model.dentition.rest_poses().items()}
     found = contacts(model.collision, P, _touch_request(model), queries, model.pairs, detector)
@@ -402,7 +403,7 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
     tested_pairs: set = set()
 
     def approaching(pair, current) -> bool:
-        if state.detector != "continuous":
+        if not state.detector.exact_touch:
             return _approaching(model, pair, current, dt, centers)
         end = {n: (P1[n] if n in current else P[n]) for n in pair}
         return _sinking(model, state, pair, end)
@@ -418,7 +419,7 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
             out.append(pair)
         return out
 
-    if state.detector == "continuous":
+    if state.detector.sweeps:
         tcut = {n: 1.0 for n in moves}
         done: set = set()
         request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=True,
@@ -429,7 +430,7 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
             tested_pairs.update(pairs)
             if not pairs:
                 break
-            res = detect_step(model.collision, P, P1, pairs, "continuous", request, queries=queries)
+            res = detect_step(model.collision, P, P1, pairs, state.detector, request, queries=queries)
             found = [(tuple(map(int, pr)), float(t)) for pr, t in zip(res.pairs, res.time_of_first_contact) if not np.isnan(t)]
             if not found:
                 break
@@ -623,18 +624,18 @@ def _impact(model: MovementModel, pair, moves, P_contact, dt, centers, restituti
     return hit.summary()
 
 
-def simulate(model: MovementModel, detector: str | None = None, steps: int | None = None,
+def simulate(model: MovementModel, detector: str | Detector | None = None, steps: int | None = None,
              queries: ExactQueries | None = None) -> Iterator[StepRecord]:
     """Run the case of `model` with `detector` (one of `orthosim.collision.detectors.DETECTORS`; the case's by
     default) for `steps` steps of the case's step_days (the case's count by default): the initial
     record (step 0), then one per `step`. queries: the run's exact queries on `model.collision`
     when the caller has prepared them (a fresh one otherwise)."""
-    detector = detector or model.case.detector
-    if detector not in DETECTORS:
+    chosen = detector_named(detector or model.case.detector)
+    if chosen is None:
         raise CaseError(model.case.path, "treatment.detector", f"unknown detector {detector!r}",
                         f"use one of: {', '.join(DETECTORS)}")
     n_steps = model.case.steps if steps is None else int(steps)
-    state, record = initial_state(model, detector, queries)
+    state, record = initial_state(model, chosen, queries)
     yield record
     for _ in range(n_steps):
         state, record = step(model, state)
