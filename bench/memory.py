@@ -1,7 +1,11 @@
 """Peak memory of long runs, each measured on `orthosim run` launched as a fresh child process.
 
 `orthosim bench` records two figures (target: under 500 MB each), so that memory that grows with a
-run's length shows as a number rather than as a machine that starts swapping:
+run's length shows as a number rather than as a machine that starts swapping. Each is the run's
+private memory: the peak over the run of the summed Private_Dirty (/proc/PID/smaps_rollup) of its
+process tree, the pages only its processes hold and have written, which only swap could take back
+(a library's clean pages, which the kernel drops by itself, do not count). The resident figures
+described below stay beside it (`*_resident_mb`):
   - `run_10k_steps_no_render_mb`: a case run for 10,000 simulation steps with `--no-render`
     (every step's record streams to steps.jsonl; nothing should grow with the step count);
   - `render_2000_frames_mb`: the case drawn into at least 2,000 frames at 640x480 (PNG frames and
@@ -272,30 +276,34 @@ def memory_timings(case: str | Path, *, steps: int = 10_000, frames: int = 2_000
         drawn_frames = 1 + case_steps * per_step
         rendered = measure_peak_memory(_orthosim_argv("run", case, "--out", tmp / "render", "--frames-per-step",
                                                       per_step, "--size", f"{size[0]}x{size[1]}", "--quiet"), env=env)
+    # The headline is private memory: pages only the run's processes hold and have written (heap,
+    # arrays, copies made on write; Private_Dirty). That is what the kernel cannot take back without
+    # swap; a library's clean pages (numba's and llvmpipe's LLVM) it drops by itself under pressure.
     record = {
-        "run_10k_steps_no_render_mb": no_render.peak_mb,
-        "render_2000_frames_mb": rendered.peak_mb,
+        "run_10k_steps_no_render_mb": no_render.tree_private_dirty_peak_mb,
+        "render_2000_frames_mb": rendered.tree_private_dirty_peak_mb,
         "target_mb": TARGET_MB,
-        "meets_target": {"run_10k_steps_no_render": no_render.exit_code == 0 and no_render.peak_mb < TARGET_MB,
-                         "render_2000_frames": rendered.exit_code == 0 and rendered.peak_mb < TARGET_MB},
+        "meets_target": {"run_10k_steps_no_render": no_render.exit_code == 0 and no_render.tree_private_dirty_peak_mb < TARGET_MB,
+                         "render_2000_frames": rendered.exit_code == 0 and rendered.tree_private_dirty_peak_mb < TARGET_MB},
+        # the distinct resident pages of the tree (libraries' clean pages included), as before
+        "run_10k_steps_no_render_resident_mb": no_render.peak_mb,
+        "render_2000_frames_resident_mb": rendered.peak_mb,
         "run_no_render": {"case": str(case), "steps": steps, **asdict(no_render)},
         "render": {"case": str(case), "steps": case_steps, "frames_per_step": per_step, "frames": drawn_frames,
                    "size": list(size), **asdict(rendered)},
         # private memory: pages only the run's processes hold; Private_Dirty (heap, arrays, written
         # copies) is what the kernel cannot take back without swap, whatever a process does with its
         # clean file pages (libraries, which the kernel drops itself under pressure)
-        "run_10k_steps_no_render_private_dirty_mb": no_render.tree_private_dirty_peak_mb,
-        "render_2000_frames_private_dirty_mb": rendered.tree_private_dirty_peak_mb,
         "run_10k_steps_no_render_uss_mb": no_render.tree_uss_peak_mb,
         "render_2000_frames_uss_mb": rendered.tree_uss_peak_mb,
         "run_10k_steps_no_render_rss_mb": no_render.tree_rss_sampled_peak_mb,
         "render_2000_frames_rss_mb": rendered.tree_rss_sampled_peak_mb,
         "render_2000_frames_pss_mb": rendered.tree_pss_sampled_peak_mb,
         "measure": rendered.peak_measure,
-        "how": "orthosim run in a fresh child process; peak of the distinct physical pages resident in its process "
-               "tree (each page once: /proc/PID/pagemap; PSS where page frames are hidden), at least the largest "
-               "VmHWM of one of its processes; the summed RSS (shared pages counted once per process) and the "
-               "summed PSS beside it",
+        "how": "orthosim run in a fresh child process; headline: peak of the summed Private_Dirty of its process "
+               "tree (/proc/PID/smaps_rollup), with the USS beside it; *_resident_mb: peak of the distinct physical "
+               "pages resident in the tree (each page once: /proc/PID/pagemap; PSS where page frames are hidden), at "
+               "least the largest VmHWM of one process; the summed RSS and PSS beside them",
         "load_average_start": list(load_start),
         "load_average_end": list(os.getloadavg()),
     }

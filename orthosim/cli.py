@@ -262,7 +262,7 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
                    f"with 2 (x{b['ratio_2_to_1']:.2f}, target x{b['target_ratio_2_to_1']})")
     m = record.get("memory")
     if m:
-        click.echo(f"peak memory: {m['run_10k_steps_no_render_mb']:.0f} MB for {m['run_no_render']['steps']} steps without "
+        click.echo(f"peak private memory: {m['run_10k_steps_no_render_mb']:.0f} MB for {m['run_no_render']['steps']} steps without "
                    f"rendering, {m['render_2000_frames_mb']:.0f} MB for {m['render']['frames']} frames (target {m['target_mb']:.0f} MB)")
 
 

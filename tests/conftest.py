@@ -20,15 +20,14 @@ def pytest_runtest_setup(item):
         pytest.skip(f"real-tooth data not found at {_REAL_DATA} (set ORTHOSIM_SHARED_DATA or put shared/ beside the repository)")
 
 
-@pytest.hookimpl(hookwrapper=True)
-def pytest_runtest_makereport(item, call):
-    outcome = yield
-    report = outcome.get_result()
-    if item.get_closest_marker("real_data") and (report.when == "call" or report.skipped):
+def pytest_runtest_logreport(report):
+    """Counted from the reports (in the one process, or in pytest-xdist's controller, which receives
+    every worker's reports with their markers among the keywords)."""
+    if "real_data" in report.keywords and (report.when == "call" or report.skipped):
         if hasattr(report, "wasxfail"):  # a known failure that ran (pytest reports it as skipped)
-            _outcomes[item.nodeid] = "xfailed" if report.skipped else "passed"
+            _outcomes[report.nodeid] = "xfailed" if report.skipped else "passed"
         else:
-            _outcomes[item.nodeid] = "skipped" if report.skipped else ("failed" if report.failed else "passed")
+            _outcomes[report.nodeid] = "skipped" if report.skipped else ("failed" if report.failed else "passed")
 
 
 def pytest_terminal_summary(terminalreporter):

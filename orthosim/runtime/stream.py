@@ -8,7 +8,6 @@ step (steps.jsonl and distances_per_step.csv stream into the run folder as they 
 
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,7 +38,7 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, 
     The per-step detail (steps.jsonl, distances_per_step.csv) streams into out_dir as it comes.
     shared: `dentition` is drawn meanwhile by another thread of this process (its meshes' caches
     are then left alone)."""
-    from orthosim.runtime.background import release_compiler_pages, release_freed_heap
+    from orthosim.runtime.background import release_freed_heap
     from orthosim.collision import CollisionModel, ExactQueries
     from orthosim.analysis.metrics import occlusion_summary
     from orthosim.movement.report import DISTANCES_PER_STEP_FILE, STEPS_FILE, RunReport
@@ -50,7 +49,6 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, 
     dent = dentition if dentition is not None else case.build_dentition()
     t1 = time.perf_counter()
     collision = CollisionModel.from_dentition(dent)
-    release_compiler_pages()  # numba's functions are loaded (the sphere trees'), before the BVHs' memory comes
     # a tooth's whole-mesh BVH is built when a step first needs it (most steps ask patches only:
     # case 1 needs 8 of its 24 teeth's), not for every tooth up front: ~55 MB less in a drawn run
     queries = ExactQueries(collision)
@@ -65,16 +63,8 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, 
     yield PhaseDone("trees", t2 - t1, f"{len(collision.bodies)} sphere trees")
     out_dir = Path(out_dir)
     report = RunReport(model, detector, steps_file=out_dir / STEPS_FILE, distances_file=out_dir / DISTANCES_PER_STEP_FILE)
-    depth_kernels = False
     for record in report.collect(simulate(model, detector, queries=queries)):
         yield record
-        if record.step == 1:  # and what the first steps compiled: numba's compiler lies idle from now on
-            release_compiler_pages()
-        elif not depth_kernels and "orthosim.geometry.penetration" in sys.modules:
-            # the depth kernels load on a run's first intersecting pair, whenever that comes, and
-            # loading them touches the compiler's pages again
-            depth_kernels = True
-            release_compiler_pages()
     report.finish_streams(out_dir)
     metrics = report.metrics()
     metrics["model"] = model_summary(dent)
