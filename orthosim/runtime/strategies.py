@@ -23,7 +23,8 @@ from typing import Iterator, Protocol
 # imported before the fork so that the two processes share it; the step's own (the collision
 # package, numba) only the simulation child imports, and the renderer only this process
 SHARED_MODULES = ("orthosim.runtime.run", "orthosim.runtime.stream", "orthosim.model.dentition", "orthosim.analysis.metrics", "orthosim.movement.records")
-SIMULATION_MODULES = ("orthosim.runtime.stream", "orthosim.collision", "orthosim.movement.simulation")
+SIMULATION_MODULES = ("orthosim.runtime.stream", "orthosim.collision.detect", "orthosim.collision.queries",
+                      "orthosim.movement.simulation")
 
 
 @dataclass
