@@ -15,6 +15,12 @@ with F_0 = 20 cN, F_sat = 150 cN, r_max = 1 mm per 30 days and A_ref = 200 mm^2 
 premolar's root surface). A premolar under 100 cN then moves 0.62 mm a month and under 150 cN
 1 mm a month: the literature's 0.5 to 1 mm a month for bodily movement at 100 to 150 cN. A first
 molar (about 300 mm^2 of root) under 150 cN moves 0.6 mm a month: molars are anchorage.
+These are the paper's replication values (`PARAMETER_SETS["paper"]`, every case's default). The
+"clinical" set is fitted to the evidence table (`orthosim/movement/evidence.toml`; the fit is
+`orthosim.analysis.calibration`, its residuals in docs/notes/clinical-evidence.md) and adds a
+mandibular bone factor k: a lower tooth resists as if its root surface were k times larger
+(A_root -> k A_root above), standing for the mandible's denser bone, which trials find moves
+canines more slowly than the maxilla.
 
 Force system to motion (Smith and Burstone's linear model). A force F at point P and a couple M
 act on a tooth whose centre of resistance is C. The centre of resistance translates at rate(F)
@@ -45,11 +51,14 @@ import numpy as np
 
 from orthosim.movement.vec import length
 
+from orthosim.model.fdi import Arch
 from orthosim.model.tooth import ROOT, Tooth
 from orthosim.movement.resistance import center_of_resistance, tipping_center
 
 # Tooth density for masses and inertias (mean of enamel, dentine and root): 2.2 g/cm^3 = 2.2e-3 g/mm^3.
 DENSITY_G_PER_MM3 = 2.2e-3
+LOWER = Arch.LOWER
+DAYS_PER_MONTH = 365.25 / 12.0  # the trials' "per month"
 CONTROLLED_TIPPING_MF_MM = 7.0  # M/F (mm) that puts the centre of rotation at the apex
 AXIAL_LEVER_MM = 3.0  # lever (mm) of a couple about the long axis: about half a crown's width
 
@@ -62,6 +71,7 @@ class RateLaw:
     saturation_cN: float = 150.0
     max_rate_mm_per_day: float = 1.0 / 30.0
     reference_root_area_mm2: float = 200.0
+    mandibular_bone_factor: float = 1.0  # a lower tooth's root resists as if k times larger (see the module text)
 
     def rate(self, force_cN, root_area_mm2) -> np.ndarray:
         """mm/day for a force magnitude (cN, scalar or array) on a root of `root_area_mm2` (mm^2)
@@ -81,6 +91,16 @@ class RateLaw:
         return bool(self.rate(force_cN, root_area_mm2) > 0.0)
 
 
+# Named parameter sets of the rate law. "paper": the replication values the paper's cases keep (the
+# step guard and golden images hold them). "clinical": least-squares fit to the evidence table's
+# rate and anchorage rows (`orthosim.analysis.calibration.fit_clinical`; a test refits and compares).
+PARAMETER_SETS: dict[str, RateLaw] = {
+    "paper": RateLaw(),
+    "clinical": RateLaw(threshold_cN=10.0, saturation_cN=50.0, max_rate_mm_per_day=0.715 / DAYS_PER_MONTH,
+                        reference_root_area_mm2=200.0, mandibular_bone_factor=2.0),
+}
+
+
 @dataclass(frozen=True, eq=False)
 class ToothMechanics:
     """What the movement model needs of one tooth, built once (local frame, mm, g)."""
@@ -96,6 +116,12 @@ class ToothMechanics:
     mass_g: float
     center_of_mass: np.ndarray  # (3,) mm local
     inertia_g_mm2: np.ndarray  # (3, 3) g*mm^2 about the centre of mass, local axes
+    bone_factor: float = 1.0  # the rate law's mandibular bone factor for a lower tooth, 1 for an upper one
+
+    @property
+    def resisting_area_mm2(self) -> float:
+        """mm^2: the root surface the rate law scales the force by (root area times the bone factor)."""
+        return self.root_area_mm2 * self.bone_factor if self.bone_factor != 1.0 else self.root_area_mm2
 
     @property
     def bracket_lever_mm(self) -> float:
@@ -122,8 +148,10 @@ def bracket_point(tooth: Tooth) -> np.ndarray:
     return np.array([float(tooth.crown_center[0]), y, z])
 
 
-def build_mechanics(tooth: Tooth, rule: str = "literature", fraction: float = 0.4) -> ToothMechanics:
-    """The tooth's mechanics (centre of resistance by `rule`, see `resistance`); mass at 2.2 g/cm^3."""
+def build_mechanics(tooth: Tooth, rule: str = "literature", fraction: float = 0.4,
+                    law: RateLaw | None = None) -> ToothMechanics:
+    """The tooth's mechanics (centre of resistance by `rule`, see `resistance`); mass at 2.2 g/cm^3;
+    a lower tooth takes `law`'s mandibular bone factor (none without a law)."""
     cr = center_of_resistance(tooth, rule, fraction)
     bracket = bracket_point(tooth)
     d = float(bracket[1] - cr[1])
@@ -141,8 +169,9 @@ def build_mechanics(tooth: Tooth, rule: str = "literature", fraction: float = 0.
         mass = float(np.prod(ext)) * 0.5 * DENSITY_G_PER_MM3
         com = mesh.bounds.mean(axis=0)
         inertia = np.diag([ext[1] ** 2 + ext[2] ** 2, ext[0] ** 2 + ext[2] ** 2, ext[0] ** 2 + ext[1] ** 2]) * mass / 12
+    bone = law.mandibular_bone_factor if law is not None and tooth.arch == LOWER else 1.0
     return ToothMechanics(tooth.fdi, cr, tipping_center(tooth), bracket, np.asarray(tooth.crown_center, float),
-                          np.asarray(tooth.apex, float), area, sigma2, mass, com, inertia)
+                          np.asarray(tooth.apex, float), area, sigma2, mass, com, inertia, bone)
 
 
 def center_of_rotation_offset(mech: ToothMechanics, m_over_f_mm: float) -> float:
@@ -232,7 +261,7 @@ def tooth_motion(mech: ToothMechanics, pose: np.ndarray, force_cN: np.ndarray, p
     F = np.asarray(force_cN, float)
     Mc = np.asarray(couple_cNmm, float)
     f = length(F)
-    area = mech.root_area_mm2
+    area = mech.resisting_area_mm2
     if wire == "round":
         Q = R @ mech.tipping_center + p
         M = (np.cross(np.asarray(point, float) - Q, F) if f > 0 else 0.0) + Mc
