@@ -96,8 +96,8 @@ class RateLaw:
 # rate and anchorage rows (`orthosim.analysis.calibration.fit_clinical`; a test refits and compares).
 PARAMETER_SETS: dict[str, RateLaw] = {
     "paper": RateLaw(),
-    "clinical": RateLaw(threshold_cN=10.0, saturation_cN=50.0, max_rate_mm_per_day=0.715 / DAYS_PER_MONTH,
-                        reference_root_area_mm2=200.0, mandibular_bone_factor=2.0),
+    "clinical": RateLaw(threshold_cN=20.1, saturation_cN=45.8, max_rate_mm_per_day=0.715 / DAYS_PER_MONTH,
+                        reference_root_area_mm2=200.0, mandibular_bone_factor=2.50),
 }
 
 
@@ -273,9 +273,7 @@ def tooth_motion(mech: ToothMechanics, pose: np.ndarray, force_cN: np.ndarray, p
     if f > 0 and (translation_only or not np.any(Mc)):
         return Motion(C, F / f * law.rate(f, area), _axial_spin(Mc, axis, area, law) if not translation_only else np.zeros(3))
     if f > 0:  # force and couple: the user's force system, Smith and Burstone
-        M = np.cross(np.asarray(point, float) - C, F) + Mc
-        r = law.rate(f, area)
-        return Motion(C, F / f * r, M / mech.sigma2_mm2 * r / f)
+        return free_motion(mech, pose, F, point, Mc, law)
     # a couple alone: the long-axis part turns the tooth about its long axis (through C), the rest
     # about the bracket (the paper's centre of rotation at the crown)
     spin = _axial_spin(Mc, axis, area, law)
@@ -288,6 +286,21 @@ def tooth_motion(mech: ToothMechanics, pose: np.ndarray, force_cN: np.ndarray, p
     if not np.any(spin):
         return Motion(B, np.zeros(3), tip)
     return Motion(B, np.cross(spin, B - C), spin + tip)  # both: first order in the step's angle
+
+
+def free_motion(mech: ToothMechanics, pose: np.ndarray, force_cN: np.ndarray, point: np.ndarray,
+                couple_cNmm: np.ndarray, law: RateLaw) -> Motion:
+    """Smith and Burstone's motion of a tooth under a force system no wire constrains: the centre of
+    resistance translates at rate(|F|) along F and the tooth turns at M_C / sigma^2 * rate / |F|
+    (rad/day), M_C the net moment (cN*mm) about the centre of resistance. pose (4, 4) local -> arch
+    frame; force_cN (3,) cN and point (3,) mm, couple_cNmm (3,) cN*mm, all arch frame; |F| > 0."""
+    R, p = pose[:3, :3], pose[:3, 3]
+    C = R @ mech.center_of_resistance + p
+    F = np.asarray(force_cN, float)
+    f = length(F)
+    M = np.cross(np.asarray(point, float) - C, F) + np.asarray(couple_cNmm, float)
+    r = law.rate(f, mech.resisting_area_mm2)
+    return Motion(C, F / f * r, M / mech.sigma2_mm2 * r / f)
 
 
 def _axial_spin(Mc: np.ndarray, axis: np.ndarray, area: float, law: RateLaw) -> np.ndarray:
