@@ -23,10 +23,9 @@ def run_rows(bench: EvidenceBench, rows: tuple[EvidenceRow, ...]) -> list[RowRes
     return out
 
 
-def run_evidence(law: RateLaw | None = None, with_real: bool = True,
-                 rows: tuple[EvidenceRow, ...] | None = None) -> list[RowResult]:
-    """The evidence table run under `law` (default: the "clinical" set), on the real patient too
-    when `with_real` and its data is present."""
+def evidence_bench(law: RateLaw | None = None, with_real: bool = True) -> EvidenceBench:
+    """A bench for `law` (default: the "clinical" set), with the real patient when `with_real` and
+    its data is present (../shared/data, `orthosim.exchange.shareddata`)."""
     from orthosim.exchange.shareddata import open_full_jaw_dir
 
     real = None
@@ -35,6 +34,10 @@ def run_evidence(law: RateLaw | None = None, with_real: bool = True,
             from orthosim.exchange.case import CASES_DIR, load_case
 
             return load_case(CASES_DIR / "open_full_jaw_patient26.toml").build_dentition()
-    bench = EvidenceBench(law or PARAMETER_SETS["clinical"], real)
-    return run_rows(bench, rows or load_evidence())
+    return EvidenceBench(law or PARAMETER_SETS["clinical"], real)
 
+
+def run_evidence(law: RateLaw | None = None, with_real: bool = True,
+                 rows: tuple[EvidenceRow, ...] | None = None) -> list[RowResult]:
+    """The evidence table (or `rows`) run under `law` (default: the "clinical" set)."""
+    return run_rows(evidence_bench(law, with_real), rows or load_evidence())
