@@ -35,6 +35,7 @@ VERDICTS = {
     "smith_burstone1984_translation": "inside",
     "smith_burstone1984_root_movement": "inside",
     "ccd2018_canine_retraction_molar_anchorage": "inside",
+    "ccd2018_lower_canine_retraction_molar_anchorage": "outside",  # the lower molars stay under the threshold
     "ccd2018_canine_retraction_implant_anchorage": "inside",
     "becker2018_en_masse_anchorage_difference": "inside",
 }
