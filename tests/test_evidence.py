@@ -179,3 +179,36 @@ def test_the_evidence_page_opens_in_headless_chromium_with_a_plot_per_row(tmp_pa
     assert "outside: the rate law saturates" in html
     # a rerun into the same folder replaces it whole
     assert orthosim("evidence", "--out", str(out), "--no-real").returncode == 0
+
+
+def test_the_report_line_names_the_rows_a_case_falls_under_and_the_papers_cases_no_treatment_row():
+    from orthosim.analysis.evidence.matching import evidence_for_case
+    from orthosim.exchange.case import CASES_DIR, load_case
+
+    def ids(name):
+        return {m.row_id for m in evidence_for_case(load_case(CASES_DIR / f"{name}.toml"), ROWS)}
+
+    assert {"monini2019_upper_canine_rate", "ccd2018_canine_retraction_molar_anchorage"} <= ids("canine_retraction_upper")
+    reinforced = ids("canine_retraction_upper_reinforced")
+    assert "ccd2018_canine_retraction_implant_anchorage" in reinforced
+    assert "ccd2018_canine_retraction_molar_anchorage" not in reinforced
+    assert "monini2019_lower_canine_rate" in ids("canine_retraction_lower")
+    assert "becker2018_en_masse_anchorage_difference" in ids("en_masse_retraction")
+    assert ids("normal_occlusion") == set()
+    assert not {i for i in ids("case1_first_premolar_extraction") if i.startswith(("monini", "ccd", "becker"))}
+
+
+@pytest.mark.parametrize("name, molar_mm", [("canine_retraction_upper", (0.8, 1.8)),
+                                            ("canine_retraction_upper_reinforced", (0.0, 0.0))])
+def test_the_shipped_canine_retraction_closes_the_space_and_the_molar_gives_what_the_trial_found(name, molar_mm):
+    from orthosim.exchange.case import CASES_DIR, load_case
+    from orthosim.movement import MovementModel, simulate
+
+    case = load_case(CASES_DIR / f"{name}.toml")
+    model = MovementModel.build(case)  # its smooth model: the loads are shared by that model's root surfaces
+    records = list(simulate(model, "continuous"))
+    first, last = records[0], records[-1]
+    moved = {t: float(np.linalg.norm(last.poses[t][:3, 3] - first.poses[t][:3, 3])) for t in (13, 16)}
+    assert any({13, 15} == set(p) for p in last.touching)  # the canine reached the second premolar
+    assert moved[13] > 5.0
+    assert molar_mm[0] <= moved[16] <= molar_mm[1] + 1e-12, moved
