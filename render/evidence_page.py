@@ -35,14 +35,14 @@ dt{font-weight:bold;margin-top:.4em}dd{margin-left:0}
 <p>Rate law: <b>{{ law_name }}</b> ({{ law_text }}). {{ counts }}. Each row is set up again on orthosim's
 model ({{ model_text }}) and measured the way the source measured it.</p>
 <table class="summary"><tr><th>row</th><th>topic</th><th>published</th><th>interval</th><th>simulated</th><th>verdict</th></tr>
-{% for r in rows %}<tr><td><a href="#{{ r.id }}">{{ r.id }}</a></td><td>{{ r.topic }}</td><td>{{ r.mean }} {{ r.unit }}</td>
+{% for r in rows %}<tr><td><a href="#{{ r.id }}">{{ r.id }}</a></td><td>{{ r.topic }}</td><td>{{ r.published }}</td>
 <td>[{{ r.low }}, {{ r.high }}]</td><td>{{ r.value }}</td><td class="{{ r.status }}">{{ r.status }}</td></tr>
 {% endfor %}</table>
 {% for r in rows %}<section id="{{ r.id }}"><div class="text"><h2>{{ r.id }}</h2>
 <p class="{{ r.status }}">{{ r.status }}{% if r.reason %}: {{ r.reason }}{% endif %}</p>
 <dl><dt>Source</dt><dd>{{ r.source }}</dd><dt>Figure</dt><dd>{{ r.figure }}</dd>
 <dt>Measured</dt><dd>{{ r.measured }}</dd><dt>Force system</dt><dd>{{ r.force_system }}</dd>
-<dt>Published</dt><dd>{{ r.mean }} {{ r.unit }}, interval [{{ r.low }}, {{ r.high }}]: {{ r.interval }}</dd>
+<dt>Published</dt><dd>{{ r.published }}, interval [{{ r.low }}, {{ r.high }}] {{ r.unit }}: {{ r.interval }}</dd>
 <dt>Simulated</dt><dd>{{ r.value }} {{ r.unit }}: {{ r.note }}</dd></dl></div>
 {% if r.plot %}<img alt="plot of {{ r.id }}" src="data:image/png;base64,{{ r.plot }}">{% endif %}</section>
 {% endfor %}</body></html>
@@ -113,7 +113,7 @@ def evidence_json(results: list[RowResult], law_name: str) -> dict:
         row = r.row
         rows.append({"id": row.id, "topic": row.topic, "source": row.source, "figure": row.figure,
                      "measured": row.measured, "force_system": row.force_system, "unit": row.unit,
-                     "published_mean": row.mean, "interval": [row.low, row.high], "interval_note": row.interval,
+                     "published_mean": row.mean if math.isfinite(row.mean) else None, "interval": [row.low, row.high], "interval_note": row.interval,
                      "model": row.model, "simulated": r.value if math.isfinite(r.value) else None,
                      "status": r.status, "inside": r.inside, "reason": r.reason, "note": r.note})
     return {"rate_law": law_name, "rows": rows,
@@ -129,7 +129,8 @@ def write_evidence(results: list[RowResult], folder: Path, law_name: str, law_te
     view = []
     for r in results:
         row = r.row
-        view.append({"id": row.id, "topic": row.topic, "mean": _fmt(row.mean), "low": _fmt(row.low), "high": _fmt(row.high),
+        published = f"{_fmt(row.mean)} {row.unit}" if math.isfinite(row.mean) else "a class, no number"
+        view.append({"id": row.id, "topic": row.topic, "published": published, "low": _fmt(row.low), "high": _fmt(row.high),
                      "unit": row.unit, "value": _fmt(r.value), "status": r.status, "reason": r.reason,
                      "source": row.source, "figure": row.figure, "measured": row.measured,
                      "force_system": row.force_system, "interval": row.interval, "note": r.note,

@@ -115,7 +115,8 @@ def _read_row(path: Path, i: int, raw: Any) -> EvidenceRow:
     keys = KIND_KEYS[kind]
     r = FieldReader(path, f"rows[{i}]", raw, _ROW + keys)
     text = {k: r.string(k) for k in ("id", "source", "figure", "measured", "force_system", "unit", "interval")}
-    mean, low, high = (r.number(k, minimum=None) for k in ("mean", "low", "high"))
+    low, high = (r.number(k, minimum=None) for k in ("low", "high"))
+    mean = r.number("mean", minimum=None) if "mean" in raw else math.nan  # a class, not a number, may have none
     if not low <= high:
         r.fail("high", f"the interval [{low:g}, {high:g}] is empty", "write low <= high")
     setup = {}
