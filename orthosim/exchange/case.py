@@ -269,7 +269,7 @@ def load_case(path: str | Path) -> Case:
 
 
 def _read_biomechanics(r: FieldReader) -> Biomechanics:
-    from orthosim.movement.biomechanics import PARAMETER_SETS
+    from orthosim.movement.ratelaw import PARAMETER_SETS
 
     parameters = r.string("parameters", "paper", tuple(PARAMETER_SETS))
     values = {}
