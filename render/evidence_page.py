@@ -74,6 +74,9 @@ def plot_row(result: RowResult) -> str:
             ax.axhspan(row.low, row.high, color="#1a7f37", alpha=0.15, label="published interval")
         else:
             ax.plot(c.x, c.y, color="#1f4e79", label="model")
+            for name, level in c.marks.items():
+                ax.axhline(level, color="#999", ls="--", lw=0.8)
+                ax.annotate(name, (c.x[0], level), fontsize=7, color="#555", va="bottom")
             _mark(ax, row, result)
         ax.set_xlabel(c.x_label, fontsize=8)
         ax.set_ylabel(c.y_label, fontsize=8)

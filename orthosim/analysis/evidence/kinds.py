@@ -143,7 +143,7 @@ def measure_cr_share(bench: EvidenceBench, row: EvidenceRow):
     shares = {t: (-CREST_BELOW_CEJ_MM - y) / tooth.root_length for t, (tooth, _, y) in found.items()}
     names = tuple(str(t) for t in shares)
     curve = Curve(np.arange(len(shares), dtype=float), np.array(list(shares.values())), "tooth (FDI)",
-                  "centre of resistance below the crest (share of root length)", "bars", names)
+                  "CR below the crest (share of root)", "bars", names)
     note = f"mean over {len(shares)} teeth, each where a labial force translates it (crest {CREST_BELOW_CEJ_MM:g} mm below the CEJ)"
     return float(np.mean(list(shares.values()))), note, curve
 
@@ -152,7 +152,7 @@ def measure_cr_below_bracket(bench: EvidenceBench, row: EvidenceRow):
     found = _cr_heights(bench, row)
     depth = {t: float(mech.bracket[1] - y) for t, (_, mech, y) in found.items()}
     curve = Curve(np.arange(len(depth), dtype=float), np.array(list(depth.values())), "tooth (FDI)",
-                  "centre of resistance below the buccal surface centre (mm)", "bars", tuple(str(t) for t in depth))
+                  "CR below the buccal surface centre (mm)", "bars", tuple(str(t) for t in depth))
     note = f"mean over teeth {', '.join(map(str, depth))}: bracket (buccal surface, mid-crown) to the translation height"
     return float(np.mean(list(depth.values()))), note, curve
 
@@ -186,8 +186,9 @@ def _turning(mech: ToothMechanics, law, m_over_f_mm: float) -> float:
 def _mf_curve(mech: ToothMechanics, law) -> Curve:
     mf = np.linspace(0.0, 14.0, 141)
     cr = np.array([rotation_center(mech, law, x) for x in mf])
-    return Curve(mf, np.clip(cr, -40.0, 40.0), "M/F at the bracket (mm)",
-                 "centre of rotation, mm occlusal of the centre of resistance")
+    cr[np.abs(cr) > 40.0] = np.nan  # the centre of rotation runs off to infinity at translation: a gap, not a line
+    return Curve(mf, cr, "M/F at the bracket (mm)", "centre of rotation (mm, + occlusal of the CR)",
+                 marks={"apex": -mech.cr_to_apex_mm, "bracket": mech.bracket_lever_mm})
 
 
 def measure_mf_center(bench: EvidenceBench, row: EvidenceRow):

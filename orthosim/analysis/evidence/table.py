@@ -55,7 +55,7 @@ class EvidenceRow:
 
 @dataclass(frozen=True)
 class Curve:
-    """What a row's plot shows: x (n,) and y (n,) with their labels; `marks` are named points (x, y)."""
+    """What a row's plot shows: x (n,) and y (n,) with their labels (y may hold NaN: gaps)."""
 
     x: np.ndarray
     y: np.ndarray
@@ -64,6 +64,7 @@ class Curve:
     style: str = "line"  # "line" or "bars" (x then holds positions, `ticks` their names)
     ticks: tuple[str, ...] = ()
     series: Mapping[str, np.ndarray] = field(default_factory=dict)  # more y arrays over the same x
+    marks: Mapping[str, float] = field(default_factory=dict)  # named levels of y (drawn as horizontal lines)
 
 
 @dataclass(frozen=True)
