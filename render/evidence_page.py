@@ -109,6 +109,13 @@ def _mark(ax, row, result: RowResult) -> None:
         ax.axhline(0.0, color="#999", ls=":")
 
 
+def _reason(result: RowResult, law_name: str) -> str:
+    """The row's reason for being outside; the table's reasons are written for the clinical set."""
+    if not result.reason or law_name == "clinical":
+        return result.reason
+    return f"outside under the {law_name!r} constants (the table's reasons are for the clinical set)"
+
+
 def evidence_json(results: list[RowResult], law_name: str) -> dict:
     """evidence.json: per row its published figure, interval, simulated value and verdict (NaN as null)."""
     rows = []
@@ -118,7 +125,7 @@ def evidence_json(results: list[RowResult], law_name: str) -> dict:
                      "measured": row.measured, "force_system": row.force_system, "unit": row.unit,
                      "published_mean": row.mean if math.isfinite(row.mean) else None, "interval": [row.low, row.high], "interval_note": row.interval,
                      "model": row.model, "simulated": r.value if math.isfinite(r.value) else None,
-                     "status": r.status, "inside": r.inside, "reason": r.reason, "note": r.note})
+                     "status": r.status, "inside": r.inside, "reason": _reason(r, law_name), "note": r.note})
     return {"rate_law": law_name, "rows": rows,
             "inside": sum(r.status == "inside" for r in results), "outside": sum(r.status == "outside" for r in results),
             "skipped": sum(r.status == "skipped" for r in results)}
@@ -134,7 +141,7 @@ def write_evidence(results: list[RowResult], folder: Path, law_name: str, law_te
         row = r.row
         published = f"{_fmt(row.mean)} {row.unit}" if math.isfinite(row.mean) else "a class, no number"
         view.append({"id": row.id, "topic": row.topic, "published": published, "low": _fmt(row.low), "high": _fmt(row.high),
-                     "unit": row.unit, "value": _fmt(r.value), "status": r.status, "reason": r.reason,
+                     "unit": row.unit, "value": _fmt(r.value), "status": r.status, "reason": _reason(r, law_name),
                      "source": row.source, "figure": row.figure, "measured": row.measured,
                      "force_system": row.force_system, "interval": row.interval, "note": r.note,
                      "plot": plot_row(r) if r.curve is not None else ""})
@@ -170,5 +177,6 @@ def evidence_command(out_dir: Path, parameters: str, no_real: bool) -> None:
                f"({sum(r.status == 'skipped' for r in results)} skipped); page: {out_dir / 'index.html'}")
     for r in results:
         if r.status == "outside":
-            click.echo(f"  outside: {r.row.id}: {_fmt(r.value)} {r.row.unit} not in [{r.row.low:g}, {r.row.high:g}]: {r.reason}")
+            click.echo(f"  outside: {r.row.id}: {_fmt(r.value)} {r.row.unit} not in [{r.row.low:g}, {r.row.high:g}]: "
+                       f"{_reason(r, parameters)}")
 

@@ -212,3 +212,11 @@ def test_the_shipped_canine_retraction_closes_the_space_and_the_molar_gives_what
     assert any({13, 15} == set(p) for p in last.touching)  # the canine reached the second premolar
     assert moved[13] > 5.0
     assert molar_mm[0] <= moved[16] <= molar_mm[1] + 1e-12, moved
+
+
+def test_the_papers_constants_miss_the_canine_trials_which_is_why_the_clinical_set_exists():
+    rows = tuple(r for r in ROWS if r.id in ("monini2019_upper_canine_rate", "monini2019_lower_canine_rate"))
+    paper = {r.row.id: r for r in run_evidence(PARAMETER_SETS["paper"], with_real=False, rows=rows)}
+    upper, lower = paper["monini2019_upper_canine_rate"], paper["monini2019_lower_canine_rate"]
+    assert upper.status == "outside" and upper.value < 0.6  # well under the trial's 0.71 mm a month
+    assert lower.value > upper.value  # and the lower canine faster than the upper, against the trial
