@@ -270,10 +270,14 @@ def measure_anchorage_en_masse(bench: EvidenceBench, row: EvidenceRow):
     s = row.setup
     front, back = tuple(s["teeth"]), tuple(s["anchor_teeth"])
     conv, lead_c, days = anchorage_run(bench, front, back, s["force_cN"], False)
-    reinf, _, _ = anchorage_run(bench, front, back, s["force_cN"], True)
+    reinf, _, days_r = anchorage_run(bench, front, back, s["force_cN"], True)
     note = (f"conventional: the molar came {conv[-1]:.2f} mm forward while the canine went {lead_c[-1]:.2f} mm back "
             f"({days[-1]:g} days); mini-implant: {reinf[-1]:.2f} mm")
-    return float(reinf[-1] - conv[-1]), note, _anchorage_curve(days, conv, lead_c, "canine (conventional)")
+    difference = np.interp(days, days_r, reinf) - conv
+    curve = Curve(days, difference, "days", "mm", series={
+        "first molar, mesial (conventional)": conv, "canine, distal (conventional)": lead_c,
+        "molar: mini-implant minus conventional": difference})
+    return float(reinf[-1] - conv[-1]), note, curve
 
 
 MEASURES = {
