@@ -35,7 +35,10 @@ REGEN = os.environ.get("ORTHOSIM_REGEN_STEP_GUARD") == "1"
 PARAMETRIC_STEPS = 20  # at most: the paper's cases whole (their collisions come from step 2 to 19)
 REAL_STEPS = 2  # a real jaw's step costs seconds
 PARAMETRIC = ("case1_first_premolar_extraction", "case2_second_premolar_extraction",
-              "case3_incisor_space_closure", "normal_occlusion")
+              "case3_incisor_space_closure", "normal_occlusion",
+              # the evidence table's treatments (issue 33), on the clinical rate law
+              "canine_retraction_upper", "canine_retraction_upper_reinforced", "canine_retraction_lower",
+              "canine_retraction_lower_reinforced", "en_masse_retraction")
 REAL = ("open_full_jaw_case1_first_premolar_extraction", "open_full_jaw_case2_second_premolar_extraction",
         "open_full_jaw_case3_diastema", "open_full_jaw_patient26")
 

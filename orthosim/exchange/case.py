@@ -99,6 +99,27 @@ class Simulation:
 
 
 @dataclass(frozen=True)
+class Biomechanics:
+    """The rate law's constants ([biomechanics] table; see `orthosim.movement.biomechanics`).
+
+    parameters: the named set the table starts from: "paper" (the paper's replication values, the
+    default, so cases written before the table keep their numbers) or "clinical" (fitted to the
+    evidence table, `orthosim evidence`). Each number the table gives replaces the set's own;
+    None keeps it. Units: cN, mm per month (365.25/12 days), mm^2, a plain factor."""
+
+    parameters: str = "paper"
+    threshold_cN: float | None = None
+    saturation_cN: float | None = None
+    max_rate_mm_per_month: float | None = None
+    reference_root_area_mm2: float | None = None
+    mandibular_bone_factor: float | None = None
+
+    def overrides(self) -> dict[str, float | None]:
+        """The table's own numbers by RateLaw field name (max_rate still per month)."""
+        return {k: getattr(self, k) for k in _BIOMECHANICS[1:]}
+
+
+@dataclass(frozen=True)
 class Case:
     path: Path
     name: str
@@ -112,6 +133,7 @@ class Case:
     detector: str
     simulation: Simulation = Simulation()
     staging: CaseStaging | None = None  # the [start] and [target] sections (aligner staging), or None
+    biomechanics: Biomechanics = Biomechanics()  # the [biomechanics] table: the rate law's constants
 
     @property
     def steps(self) -> int:
@@ -170,7 +192,7 @@ class Case:
         return is_cached(*self._mesh_model_key())
 
 
-_TOP = ("case", "model", "treatment", "wire", "loads", "simulation", "start", "target")
+_TOP = ("case", "model", "treatment", "wire", "loads", "simulation", "start", "target", "biomechanics")
 _CASE = ("name", "description")
 _MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files", "scale", "frame",
           "max_triangles_per_tooth")
@@ -180,6 +202,13 @@ _TREATMENT = ("extractions", "duration_days", "step_days", "detector")
 _WIRE = ("type",)
 _SIMULATION = ("force_share", "restitution", "resistance_rule", "resistance_fraction", "occlusal_slide_mm")
 RESISTANCE_RULES = ("literature", "paper")
+_BIOMECHANICS = ("parameters", "threshold_cN", "saturation_cN", "max_rate_mm_per_month", "reference_root_area_mm2",
+                 "mandibular_bone_factor")
+# (lowest, highest, unit, example) of each number of the [biomechanics] table
+_BIOMECHANICS_RANGES = {"threshold_cN": (0.0, 300.0, "cN", "20"), "saturation_cN": (1.0, 1000.0, "cN", "150"),
+                        "max_rate_mm_per_month": (0.01, 5.0, "mm per month", "1.0"),
+                        "reference_root_area_mm2": (50.0, 1000.0, "mm^2", "200"),
+                        "mandibular_bone_factor": (0.25, 4.0, "", "1.0")}
 _LOAD = ("teeth", "force_cN", "direction", "point", "moment_cNmm", "moment_axis", "movement")
 
 
@@ -234,7 +263,32 @@ def load_case(path: str | Path) -> Case:
     simulation = _read_simulation(FieldReader(path, "simulation", top.get("simulation", {}), _SIMULATION))
 
     staging = read_case_staging(path, data, present, set(extractions))
-    return Case(path, name, description, model, tuple(extractions), loads, wire, duration, step, detector, simulation, staging)
+    biomechanics = _read_biomechanics(FieldReader(path, "biomechanics", top.get("biomechanics", {}), _BIOMECHANICS))
+    return Case(path, name, description, model, tuple(extractions), loads, wire, duration, step, detector, simulation, staging,
+                biomechanics)
+
+
+def _read_biomechanics(r: FieldReader) -> Biomechanics:
+    from orthosim.movement.ratelaw import PARAMETER_SETS
+
+    parameters = r.string("parameters", "paper", tuple(PARAMETER_SETS))
+    values = {}
+    for key, (low, high, unit, example) in _BIOMECHANICS_RANGES.items():
+        if key not in r.table:
+            continue
+        v = r.number(key)
+        if not low <= v <= high:
+            r.fail(key, f"{v:g}{' ' + unit if unit else ''} is outside {low:g} to {high:g}",
+                   f"use a value from {low:g} to {high:g}, e.g. {example}, or leave it out")
+        values[key] = v
+    base = PARAMETER_SETS[parameters]
+    threshold = values.get("threshold_cN", base.threshold_cN)
+    saturation = values.get("saturation_cN", base.saturation_cN)
+    if saturation <= threshold:
+        key = "saturation_cN" if "saturation_cN" in values else "threshold_cN"
+        r.fail(key, f"the saturation force ({saturation:g} cN) must exceed the threshold ({threshold:g} cN)",
+               f"raise saturation_cN above threshold_cN (the {parameters!r} set has {base.threshold_cN:g} and {base.saturation_cN:g})")
+    return Biomechanics(parameters, **values)
 
 
 def _read_simulation(r: FieldReader) -> Simulation:

@@ -39,7 +39,7 @@ Units: mm, degrees in reports, cN, cN*mm, days.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Iterator, Mapping
 
 import numpy as np
@@ -53,7 +53,8 @@ from orthosim.collision.detectors import DETECTORS, Detector, detector_named
 from orthosim.errors import CaseError
 from orthosim.collision.interpenetration import default_occlusal_slide_mm
 from orthosim.analysis.metrics import tooth_to_tooth_distances
-from orthosim.movement.biomechanics import Motion, RateLaw, ToothMechanics, build_mechanics, tooth_motion
+from orthosim.movement.biomechanics import (DAYS_PER_MONTH, PARAMETER_SETS, Motion, RateLaw, ToothMechanics, build_mechanics,
+                                           tooth_motion)
 from orthosim.movement.impact import Body, impact
 from orthosim.movement.propagation import ForceBalance, propagate
 from orthosim.movement.records import CollisionEvent, StepRecord
@@ -93,11 +94,24 @@ class MovementSettings:
         slide = getattr(sim, "occlusal_slide_mm", None)
         if slide is None:
             slide = default_occlusal_slide_mm(dentition) if dentition is not None else cls.occlusal_slide_mm
+        rate = rate_law(getattr(case, "biomechanics", None))
         if sim is None:
-            return cls(occlusal_slide_mm=slide)
+            return cls(occlusal_slide_mm=slide, rate=rate)
         return cls(force_share=sim.force_share, restitution=sim.restitution,
                    resistance_rule=sim.resistance_rule, resistance_fraction=sim.resistance_fraction,
-                   occlusal_slide_mm=slide)
+                   rate=rate, occlusal_slide_mm=slide)
+
+
+def rate_law(biomechanics) -> RateLaw:
+    """The rate law a case's [biomechanics] table names: its parameter set with the table's own
+    numbers over it (`orthosim.exchange.case.Biomechanics`; None: the paper's set)."""
+    if biomechanics is None:
+        return PARAMETER_SETS["paper"]
+    base = PARAMETER_SETS[biomechanics.parameters]
+    changes = {k: v for k, v in biomechanics.overrides().items() if v is not None}
+    if "max_rate_mm_per_month" in changes:
+        changes["max_rate_mm_per_day"] = changes.pop("max_rate_mm_per_month") / DAYS_PER_MONTH
+    return replace(base, **changes) if changes else base
 
 
 @dataclass(frozen=True, eq=False)
@@ -137,7 +151,8 @@ class MovementModel:
         pairs = candidate_pairs(dentition.fdis, extracted)
         neighbours = set(dentition.adjacent_pairs(set(extracted)))
         facing = frozenset(p for p in pairs if tuple(p) not in neighbours)
-        mech = {n: build_mechanics(dentition.teeth[n], settings.resistance_rule, settings.resistance_fraction) for n in present}
+        mech = {n: build_mechanics(dentition.teeth[n], settings.resistance_rule, settings.resistance_fraction, settings.rate)
+                for n in present}
         orders = {arch: [t for t in F.arch_order(arch, set(dentition.teeth)) if t not in extracted] for arch in F.Arch}
         return cls(case, dentition, collision, mech, settings, extracted, present, tuple(map(tuple, pairs)), facing,
                    arch_orders=orders)
@@ -322,7 +337,7 @@ def forces(model: MovementModel, state: StepState, centers: Mapping[int, np.ndar
     applied = {n: sum((a.force_cN for a in v), np.zeros(3)) for n, v in loads.items()}
     normals = [(a, b, _normal(model, (a, b), centers)) for a, b in state.touching]
     balance = propagate(applied, normals, s.force_share,
-                        lambda n, f: n in model.mechanics and s.rate.moves(f, model.mechanics[n].root_area_mm2),
+                        lambda n, f: n in model.mechanics and s.rate.moves(f, model.mechanics[n].resisting_area_mm2),
                         _onward(model, P, state.touching, centers))
     return Forces(loads, balance)
 
@@ -371,7 +386,7 @@ def motions(model: MovementModel, state: StepState, f: Forces, centers: Mapping[
                 mi = out.get(i, Motion.still(centers[i]))
                 cur = float(mi.displacement(p, dt)[0] @ n_ij) / dt
                 push = float(balance.total[i] @ n_ij)
-                want = float(s.rate.rate(length(balance.total[i]), model.mechanics[i].root_area_mm2)) * push / max(
+                want = float(s.rate.rate(length(balance.total[i]), model.mechanics[i].resisting_area_mm2)) * push / max(
                     length(balance.total[i]), 1e-12)
                 target = min(away, want)
                 if target > cur + 1e-12:

@@ -87,6 +87,7 @@ def case_record(data: CaseData, images: dict) -> dict:
         "sphere_tree_fit": fits,
         "sphere_tree_fit_mean_sov_sum": (sum(f["sov_sum"] for f in fits.values()) / len(fits)) if fits else None,
         "throughput": throughput,
+        "evidence_rows": [{"id": m.row_id, "topic": m.topic, "why": m.why} for m in data.evidence],
         "images": images,
     }
 
