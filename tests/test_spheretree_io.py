@@ -10,7 +10,7 @@ import trimesh
 
 from orthosim.errors import SphereTreeError
 from orthosim.spheretree import SphereTree, build_sphere_tree, cached_sphere_tree, cached_sphere_trees, read_sph, write_sph
-from orthosim.spheretree.cache import cache_key, load_tree, save_tree, store_entry
+from orthosim.spheretree.cache import cache_key, load_tree, store_entry
 
 
 def _mesh() -> trimesh.Trimesh:
