@@ -58,7 +58,7 @@ class FieldReader:
         if not math.isfinite(value):
             self.fail(key, f"must be finite, got {value}", "write a finite number (no nan or inf)")
         allowed = _range_text(0.0 if positive and minimum is None else minimum, maximum, unit, positive)
-        reason = f" ({why})" if why else ""
+        reason = f"; {why}" if why else ""
         if positive and value <= 0:
             self.fail(key, f"must be positive, got {value:g}", f"use a value above 0{allowed and ': ' + allowed}{reason}")
         if minimum is not None and value < minimum:
