@@ -61,8 +61,8 @@ def write_shipped_run(run_dir: Path, files: dict[str, bytes]) -> None:
     if record is not None:
         run = json.loads(record)
         run["case_file"] = str(run_dir / "case.toml")
-        if isinstance(run.get("outputs"), dict):  # the checksum of what this side wrote (runfolder.read_finished_run)
-            run["outputs"].update((k, v) for k, v in rewritten.items() if k in run["outputs"])
+        if isinstance(run.get("output_sha256"), dict):  # the checksum of what this side wrote (runfolder.read_finished_run)
+            run["output_sha256"].update((k, v) for k, v in rewritten.items() if k in run["output_sha256"])
         write_bytes(run_dir / RUN_FILE, (json.dumps(run, indent=2) + "\n").encode())
 
 

@@ -2,7 +2,7 @@
 
 `run.json` is written last, after every other output of the run. It names the orthosim version
 that wrote the folder, the case file (and its SHA-256), the detector, `complete: true`, and the
-SHA-256 of every file the run left at the top of the folder (`outputs`). A folder without it, or
+SHA-256 of every file the run left at the top of the folder (`output_sha256`). A folder without it, or
 whose `run.json` says otherwise, holds no finished run; reports, batches and regression tools read
 a run only through `read_finished_run`, which refuses such folders, folders written by another
 orthosim version, and folders whose recorded files are missing or changed since (a damaged disk, a
@@ -47,7 +47,7 @@ def write_run_record(out_dir: str | Path, case_file: str | Path, detector: str, 
         "case_sha256": file_sha256(case_file),
         "detector": detector,
         **(extra or {}),
-        "outputs": output_digests(out_dir),
+        "output_sha256": output_digests(out_dir),
     }
     write_json(Path(out_dir) / RUN_FILE, record)
     return record
@@ -72,7 +72,7 @@ def read_finished_run(run_dir: str | Path) -> dict:
     if version != __version__:
         raise RunFolderError(path, "orthosim_version", f"the run was written by orthosim {version}, this is {__version__}",
                              rerun)
-    _check_outputs(run_dir, record.get("outputs"), rerun)
+    _check_outputs(run_dir, record.get("output_sha256"), rerun)
     return record
 
 
@@ -80,7 +80,7 @@ def _check_outputs(run_dir: Path, outputs, rerun: str) -> None:
     """Refuse a run whose recorded files are missing or no longer the bytes the run wrote."""
     path = run_dir / RUN_FILE
     if not isinstance(outputs, dict) or not all(isinstance(v, str) for v in outputs.values()):
-        raise RunFolderError(path, "outputs", "holds no checksums of the run's files", rerun)
+        raise RunFolderError(path, "output_sha256", "holds no checksums of the run's files", rerun)
     for name, digest in outputs.items():
         file = run_dir / name
         if Path(name).name != name or not file.is_file():
