@@ -62,6 +62,14 @@ def _same_tree(a, b) -> bool:
         ((a.centers[k], b.centers[k]), (a.radii[k], b.radii[k]), (a.parents[k], b.parents[k])))
 
 
+def _tree_path(folder: Path, i: int) -> Path:
+    return _entry(_capsule(2.5 + i), "fit", BRANCHING, TREE_DEPTH, folder).path
+
+
+def _samples_tag() -> str:
+    return "-".join(str(FIT_SAMPLES[k]) for k in sorted(FIT_SAMPLES))
+
+
 def _dentition_params(i: int) -> dict:
     return {"kind": "test", "size_mm": 8.0 + i}
 
@@ -72,11 +80,10 @@ KINDS = [
               lambda folder, i: entry_path(_dentition_params(i), cache_dir=folder), _same_dentition),
     EntryKind("sphere tree",
               lambda folder, i: cached_sphere_tree(_capsule(2.5 + i), depth=TREE_DEPTH, cache_dir=folder),
-              lambda folder, i: _entry(_capsule(2.5 + i), "fit", BRANCHING, TREE_DEPTH, folder).path, _same_tree),
+              _tree_path, _same_tree),
     EntryKind("tree fit",
               lambda folder, i: cached_fit(_capsule(2.5 + i), depth=TREE_DEPTH, cache_dir=folder, samples=FIT_SAMPLES),
-              lambda folder, i: fits_dir(folder) / (f"{_entry(_capsule(2.5 + i), 'fit', BRANCHING, TREE_DEPTH, folder).path.stem}-"
-                                                    + "-".join(str(FIT_SAMPLES[k]) for k in sorted(FIT_SAMPLES)) + ".json"),
+              lambda folder, i: fits_dir(folder) / f"{_tree_path(folder, i).stem}-{_samples_tag()}.json",
               lambda a, b: a == b),
 ]
 

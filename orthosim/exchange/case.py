@@ -340,7 +340,7 @@ def _read_model(path: Path, r: FieldReader) -> ModelSpec:
     budget = r.get("max_triangles_per_tooth")
     if budget is not None and (isinstance(budget, bool) or not isinstance(budget, int)
                                or not MIN_TRIANGLES_PER_TOOTH <= budget <= MAX_TRIANGLES_PER_TOOTH):
-        r.fail("max_triangles_per_tooth", f"must be a whole number from {MIN_TRIANGLES_PER_TOOTH:,} to "
+        r.fail("max_triangles_per_tooth", f"must be a whole number of at least {MIN_TRIANGLES_PER_TOOTH:,} and at most "
                f"{MAX_TRIANGLES_PER_TOOTH:,}, got {budget!r}", "write e.g. 100000 (the default), or leave it out")
     return ModelSpec(kind, diastema_mm=diastema, folder=folder, files=files, scale=_bounded(r, "scale", 1.0),
                      folders=tuple(folders) if kind == "open-full-jaw" else (), frame=frame,

@@ -10,7 +10,8 @@ builder changes its output on purpose) and the source text of the modules that b
 header (no pickle), checksummed and written atomically through `orthosim.storage.cacheentry`: two
 processes building the same model at once both end with a whole file. An entry that fails its
 checks (unreadable, wrong checksum or key, non-finite numbers, wrong shapes, face indices out of
-range) is a miss, reported in one warning line naming it, rebuilt and overwritten; a folder that cannot be written costs a rebuild next time, never a failure.
+range) is a miss, reported in one warning line naming it, rebuilt and overwritten; a folder that
+cannot be written costs a rebuild next time, never a failure.
 Warnings the build raised (mesh repairs) are stored with it and raised again on every load.
 
 The folder is `$ORTHOSIM_CACHE/dentitions` when that is set, else `~/.cache/orthosim/dentitions`.

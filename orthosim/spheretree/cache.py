@@ -7,8 +7,8 @@ and `BUILDER_VERSION` is bumped as well whenever a builder changes its output on
 loads one small .npz in milliseconds; a miss builds and writes the file atomically, so two
 processes racing on the same tree both end with a whole file. Entries carry a checksum, their key
 and the entry format (`orthosim.storage.cacheentry`), and every load also checks the tree still
-bounds its mesh (`damage`): a damaged entry is named in one warning and rebuilt. The folder is `$ORTHOSIM_CACHE` if
-set, else `~/.cache/orthosim/spheretrees`.
+bounds its mesh (`damage`): a damaged entry is named in one warning and rebuilt. The folder is
+`$ORTHOSIM_CACHE` if set, else `~/.cache/orthosim/spheretrees`.
 
 Left and right teeth are mirror images (x -> -x in the local frame, see `orthosim.model.tooth`), and a
 mirror maps a conservative tree to a conservative tree exactly (negating a float is exact), so a
@@ -23,7 +23,6 @@ import functools
 import hashlib
 import multiprocessing
 import os
-import warnings
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -33,7 +32,8 @@ import numpy as np
 
 from orthosim.errors import DamagedFileError
 from orthosim.storage.atomic import atomic_path
-from orthosim.storage.cacheentry import ENTRY_FORMAT, HEADER, DamagedEntryWarning, damaged, read_arrays, warn_damaged, write_arrays
+from orthosim.storage.cacheentry import (ENTRY_FORMAT, HEADER, DamagedEntryWarning, damaged, read_arrays, warn_damaged,
+                                        write_arrays)
 from orthosim.runtime.lifeline import exit_with_parent
 from orthosim.storage.sourcedigest import source_digest
 from orthosim.spheretree.build import DEPTH, build_sphere_tree, check_request, default_branching, mesh_arrays
