@@ -13,6 +13,13 @@ from orthosim.exchange.shareddata import OPEN_FULL_JAW, shared_data_dir
 
 _REAL_DATA = shared_data_dir() / OPEN_FULL_JAW
 _outcomes: dict[str, str] = {}
+_damaged_entries: dict[str, int] = {}  # kind of cache entry -> damaged copies a test loaded (tests/test_damaged_entries.py)
+
+
+@pytest.fixture
+def damage_tally() -> dict[str, int]:
+    """Where a test counts the damaged files it tried; the run's summary prints the counts."""
+    return _damaged_entries
 
 
 def pytest_runtest_setup(item):
@@ -34,3 +41,6 @@ def pytest_terminal_summary(terminalreporter):
     ran = sum(v != "skipped" for v in _outcomes.values())
     skipped = sum(v == "skipped" for v in _outcomes.values())
     terminalreporter.write_line(f"real-data tests ({_REAL_DATA}): {ran} ran, {skipped} skipped")
+    if _damaged_entries:
+        tried = ", ".join(f"{kind} {n}" for kind, n in sorted(_damaged_entries.items()))
+        terminalreporter.write_line(f"damaged cache entries tried: {sum(_damaged_entries.values())} ({tried})")

@@ -197,6 +197,25 @@ _CASE = ("name", "description")
 _MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files", "scale", "frame",
           "max_triangles_per_tooth")
 MIN_TRIANGLES_PER_TOOTH = 10_000  # fewer would flatten a molar's cusps and fossae (the smooth parametric molar has 7,000)
+MAX_TRIANGLES_PER_TOOTH = 2_000_000  # 32 teeth of that hold about 3 GB of mesh arrays
+MAX_RESOLUTION = 256  # ring points: four times the finest preset
+# What a real mouth allows, per numeric field: (low, high, unit, why); README "Allowed ranges" says the
+# same with sources. A value outside is refused in one line before any work.
+RANGES = {
+    "diastema_mm": (0.0, 10.0, "mm", "wider than a central incisor's crown (8.5 mm) is no gap tooth movement closes"),
+    "scale": (1e-4, 1e4, "", "mm per file unit: 0.001 for micrometres, 25.4 for inches, 1000 for metres"),
+    "duration_days": (0.0, 1825.0, "days", "five years; fixed-appliance treatment lasts 20 months on average"),
+    "step_days": (0.0, 365.0, "days", "a year; visits are 4-8 weeks apart and aligners change every 1-2 weeks"),
+    "force_cN": (0.0, 500.0, "cN", "orthodontic forces on a tooth are 10-120 cN; 500 cN is orthopaedic"),
+    "moment_cNmm": (-5000.0, 5000.0, "cN*mm", "a 500 cN force at the 10 mm moment-to-force ratio of bodily movement"),
+    "point": (-30.0, 30.0, "mm", "the longest tooth, a canine, is 27 mm from cusp tip to apex"),
+}
+
+
+def _bounded(r: FieldReader, key: str, default: float, positive: bool = False) -> float:
+    """A number of the case within its `RANGES` entry (one-line CaseError naming field and range)."""
+    low, high, unit, why = RANGES[key]
+    return r.number(key, default, positive=positive, minimum=None if positive else low, maximum=high, unit=unit, why=why)
 FRAMES = ("arch", "scan")
 _TREATMENT = ("extractions", "duration_days", "step_days", "detector")
 _WIRE = ("type",)
@@ -245,8 +264,8 @@ def load_case(path: str | Path) -> Case:
         extractions.append(treat.tooth(f"extractions[{i}]", t, present))
     if len(set(extractions)) != len(extractions):
         treat.fail("extractions", "lists a tooth twice", "list each tooth once")
-    duration = treat.number("duration_days", 90.0, positive=True)
-    step = treat.number("step_days", 1.0, positive=True)
+    duration = _bounded(treat, "duration_days", 90.0, positive=True)
+    step = _bounded(treat, "step_days", 1.0, positive=True)
     if step > duration:
         treat.fail("step_days", f"step ({step:g} days) is longer than the duration ({duration:g} days)",
                    "use a step no longer than duration_days")
@@ -322,12 +341,14 @@ def _read_model(path: Path, r: FieldReader) -> ModelSpec:
                 r.fail("resolution", f"unknown resolution {resolution!r}", f"use one of {', '.join(RESOLUTIONS)} or an even number >= 6")
         elif isinstance(resolution, bool) or not isinstance(resolution, int) or resolution < 6 or resolution % 2:
             r.fail("resolution", f"must be a preset name or an even number >= 6, got {resolution!r}", "use e.g. \"smooth\" or 40")
-        return ModelSpec(kind, resolution, r.boolean("third_molars", False), r.number("diastema_mm", 0.0))
+        if isinstance(resolution, int) and resolution > MAX_RESOLUTION:
+            r.fail("resolution", f"{resolution} ring points is more than {MAX_RESOLUTION}", "use e.g. \"fine\" (64) or fewer points")
+        return ModelSpec(kind, resolution, r.boolean("third_molars", False), _bounded(r, "diastema_mm", 0.0))
 
     for key in ("resolution", "third_molars"):
         if key in r.table:
             r.fail(key, "applies only to the parametric model", "remove it, or set kind = \"parametric\"")
-    diastema = r.number("diastema_mm", 0.0)
+    diastema = _bounded(r, "diastema_mm", 0.0)
     folder_raw = r.get("folder")
     many = isinstance(folder_raw, list) and kind == "open-full-jaw"
     if many and (not folder_raw or not all(isinstance(f, str) for f in folder_raw)):
@@ -371,10 +392,11 @@ def _read_model(path: Path, r: FieldReader) -> ModelSpec:
                 r.fail(f"folder[{i}]" if many else "folder", f"no tooth_N.stl files in {f}",
                        "point it at an Open-Full-Jaw maxilla or mandible folder, or the patient folder holding both")
     budget = r.get("max_triangles_per_tooth")
-    if budget is not None and (isinstance(budget, bool) or not isinstance(budget, int) or budget < MIN_TRIANGLES_PER_TOOTH):
-        r.fail("max_triangles_per_tooth", f"must be a whole number of at least {MIN_TRIANGLES_PER_TOOTH:,}, got {budget!r}",
-               "write e.g. 100000 (the default), or leave it out")
-    return ModelSpec(kind, diastema_mm=diastema, folder=folder, files=files, scale=r.number("scale", 1.0, positive=True),
+    if budget is not None and (isinstance(budget, bool) or not isinstance(budget, int)
+                               or not MIN_TRIANGLES_PER_TOOTH <= budget <= MAX_TRIANGLES_PER_TOOTH):
+        r.fail("max_triangles_per_tooth", f"must be a whole number of at least {MIN_TRIANGLES_PER_TOOTH:,} and at most "
+               f"{MAX_TRIANGLES_PER_TOOTH:,}, got {budget!r}", "write e.g. 100000 (the default), or leave it out")
+    return ModelSpec(kind, diastema_mm=diastema, folder=folder, files=files, scale=_bounded(r, "scale", 1.0),
                      folders=tuple(folders) if kind == "open-full-jaw" else (), frame=frame,
                      max_triangles_per_tooth=budget)
 
@@ -405,8 +427,8 @@ def _read_load(path: Path, i: int, raw: Any, present: set[int], extracted: set[i
         if t in extracted:
             r.fail(f"teeth[{j}]", f"tooth {t} is extracted in this case and cannot carry a load",
                    "load a tooth that stays, or remove it from treatment.extractions")
-    force = r.number("force_cN", 0.0)
-    moment = r.number("moment_cNmm", 0.0, minimum=None)
+    force = _bounded(r, "force_cN", 0.0)
+    moment = _bounded(r, "moment_cNmm", 0.0)
     if force == 0.0 and moment == 0.0:
         r.fail(None, "has neither a force nor a moment", "set force_cN (cN) and/or moment_cNmm (cN*mm)")
     direction_raw = r.get("direction", "mesial")
@@ -418,6 +440,10 @@ def _read_load(path: Path, i: int, raw: Any, present: set[int], extracted: set[i
             r.fail("direction", "is the zero vector", "give a non-zero direction in the arch frame")
     point_raw = r.get("point", "bracket")
     point = r.string("point", "bracket", POINTS) if isinstance(point_raw, str) else r.vector("point", point_raw)
+    low, high, unit, why = RANGES["point"]
+    if not isinstance(point, str) and not all(low <= x <= high for x in point):
+        r.fail("point", f"{list(point)} is more than {high:g} {unit} from the tooth's CEJ centre",
+               f"give tooth-frame coordinates from {low:g} to {high:g} {unit} ({why})")
     moment_axis = r.string("moment_axis", "mesiodistal", MOMENT_AXES)
     movement = r.string("movement", "auto", MOVEMENTS)
     if movement not in WIRE_MOVEMENTS[wire.type]:
