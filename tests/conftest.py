@@ -17,9 +17,13 @@ _damaged_entries: dict[str, int] = {}  # kind of cache entry -> damaged copies a
 
 
 @pytest.fixture
-def damage_tally() -> dict[str, int]:
-    """Where a test counts the damaged files it tried; the run's summary prints the counts."""
-    return _damaged_entries
+def damage_tally(request) -> dict[str, int]:
+    """Where a test counts the damaged files it tried; the run's summary prints the counts. They
+    travel with the test's teardown report (its user properties), so pytest-xdist's controller,
+    which prints the summary, receives them from its workers."""
+    tally: dict[str, int] = {}
+    yield tally
+    request.node.user_properties.append(("damaged_entries", dict(tally)))
 
 
 def pytest_runtest_setup(item):
@@ -30,6 +34,11 @@ def pytest_runtest_setup(item):
 def pytest_runtest_logreport(report):
     """Counted from the reports (in the one process, or in pytest-xdist's controller, which receives
     every worker's reports with their markers among the keywords)."""
+    if report.when == "teardown":
+        for name, tally in report.user_properties:
+            if name == "damaged_entries":
+                for kind, n in tally.items():
+                    _damaged_entries[kind] = _damaged_entries.get(kind, 0) + n
     if "real_data" in report.keywords and (report.when == "call" or report.skipped):
         if hasattr(report, "wasxfail"):  # a known failure that ran (pytest reports it as skipped)
             _outcomes[report.nodeid] = "xfailed" if report.skipped else "passed"
