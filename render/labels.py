@@ -43,19 +43,19 @@ FIX = "render the golden again (pytest --orthosim-force-regen, or orthosim imgdi
 
 @dataclass(frozen=True)
 class LabelEntry:
-    """One label id of a frame: what it shows and, for a tooth, its dental axes as seen in the image.
+    """One label id of a frame: what it shows and, for a tooth, its dental axes as the camera sees them.
 
-    `mesial`, `occlusal`, `facial`: the image shift (column, row) of a 1 mm move of the tooth along
-    that axis, divided by the pixel size in mm at the tooth's depth: a unitless (2,) vector of
-    length 1 when the axis lies in the view plane and near 0 when it points at the camera.
+    `mesial`, `occlusal`, `facial`: unit (3,) vectors in the camera frame of the image (x along the
+    image's columns, y down its rows, z away from the camera), the directions in which the tooth
+    would move mesially, occlusally (incisally) and facially (labially or buccally).
     """
 
     id: int
     kind: str  # one of KINDS
     teeth: tuple[int, ...] = ()  # (fdi,) for a tooth, (a, b) with a < b for a contact, () otherwise
-    mesial: tuple[float, float] | None = None
-    occlusal: tuple[float, float] | None = None
-    facial: tuple[float, float] | None = None
+    mesial: tuple[float, float, float] | None = None
+    occlusal: tuple[float, float, float] | None = None
+    facial: tuple[float, float, float] | None = None
 
     @property
     def key(self) -> tuple:
@@ -94,9 +94,9 @@ class LabelEntry:
         axes = {}
         for axis in ("mesial", "occlusal", "facial"):
             value = data.get(axis)
-            if value is not None and not (isinstance(value, list) and len(value) == 2
+            if value is not None and not (isinstance(value, list) and len(value) == 3
                                           and all(isinstance(v, (int, float)) for v in value)):
-                raise bad(axis, f"of label {data['id']} is {value!r}, not [column, row]")
+                raise bad(axis, f"of label {data['id']} is {value!r}, not [x, y, z] in the camera frame")
             axes[axis] = tuple(float(v) for v in value) if value is not None else None
         return cls(data["id"], kind, tuple(teeth), **axes)
 
@@ -112,6 +112,17 @@ class LabelCamera:
     def mm_per_px(self, depth_mm) -> np.ndarray:
         """Size in mm, in the view plane, of one pixel at distance `depth_mm` (mm along the view axis)."""
         return 2.0 * np.asarray(depth_mm, float) * np.tan(self.yfov / 2) / self.size[1]
+
+    def displacement_mm(self, pixel: tuple[float, float], depth_mm: float, shift_px, shift_depth_mm: float) -> np.ndarray:
+        """(3,) mm in the camera frame (x right, y down, z away): the move of the surface point seen at
+        `pixel` (column, row) and `depth_mm` whose image moved by `shift_px` (column, row) and whose depth
+        changed by `shift_depth_mm`. Perspective included: a move toward the camera also moves the image."""
+        k = self.mm_per_px(1.0)  # mm per pixel per mm of depth
+        centre = np.array([self.size[0] / 2 - 0.5, self.size[1] / 2 - 0.5])  # image centre, pixel index units
+        offset = np.asarray(pixel, float) - centre
+        z1 = depth_mm + shift_depth_mm
+        lateral = k * ((offset + np.asarray(shift_px, float)) * z1 - offset * depth_mm)
+        return np.array([lateral[0], lateral[1], shift_depth_mm])
 
 
 @dataclass(frozen=True, eq=False)
@@ -180,25 +191,18 @@ def _marker_ids(scene, centers: np.ndarray) -> tuple[np.ndarray, list[tuple[int,
     return (FIRST_CONTACT_ID + cost.argmin(axis=1)).astype(np.float32), pairs
 
 
-def _tooth_axes(scene, fdis: list[int], camera: LabelCamera) -> dict[int, dict]:
-    """Each dental axis of each tooth in `fdis` as an image vector, unitless (see LabelEntry)."""
-    if not fdis:
-        return {}
-    view = scene.current_view
-    points = []
+def _tooth_axes(scene, fdis: list[int]) -> dict[int, dict]:
+    """Each dental axis of each tooth in `fdis` in the camera frame (see LabelEntry)."""
+    # camera pose columns: image right, image up, toward the viewer; the labels' frame: right, down, away
+    to_camera = scene.current_view.pose[:3, :3].T * np.array([1.0, -1.0, -1.0])[:, None]
+    axes = {}
     for fdi in fdis:
         tooth = scene.dentition.teeth[fdi]
-        pose = np.asarray(scene.teeth[fdi].node._matrix, float)
-        center = tooth.to_world(tooth.crown_center, pose)
-        # a small move keeps the projection linear
-        axes = 0.01 * np.stack([tooth.mesial, tooth.long_axis, tooth.labial]) @ pose[:3, :3].T
-        points.append(np.vstack([center, center + axes]))
-    points = np.stack(points)  # (n, 4, 3): crown centre, then 0.01 mm along each axis
-    depth = (points[:, 0] - view.pose[:3, 3]) @ -view.pose[:3, 2]
-    px = view.project(points.reshape(-1, 3), camera.size).reshape(len(fdis), 4, 2)
-    vectors = (px[:, 1:] - px[:, :1]) * (camera.mm_per_px(depth) / 0.01)[:, None, None]
-    return {fdi: {axis: tuple(v.tolist()) for axis, v in zip(("mesial", "occlusal", "facial"), vectors[k])}
-            for k, fdi in enumerate(fdis)}
+        rotation = np.asarray(scene.teeth[fdi].node._matrix, float)[:3, :3]
+        local = np.stack([tooth.mesial, tooth.long_axis, tooth.labial])
+        vectors = local @ rotation.T @ to_camera.T
+        axes[fdi] = {name: tuple(round(float(x), 6) for x in v) for name, v in zip(("mesial", "occlusal", "facial"), vectors)}
+    return axes
 
 
 def render_labelled(renderer, scene, view: str | None = None) -> tuple[np.ndarray, LabelFrame]:
@@ -219,7 +223,7 @@ def render_labelled(renderer, scene, view: str | None = None) -> tuple[np.ndarra
     depth = 2.0 * v.znear * v.zfar / (v.zfar + v.znear - ndc * (v.zfar - v.znear))
     depth_mm = np.where(window < 1.0, depth, np.nan).astype(np.float32)
     present = sorted(set(np.unique(labels).tolist()) - {BACKGROUND_ID})
-    axes = _tooth_axes(scene, [label for label in present if label in scene.teeth], camera)
+    axes = _tooth_axes(scene, [label for label in present if label in scene.teeth])
     legend = []
     for label in present:
         if label == MARKER_ID:
