@@ -119,6 +119,31 @@ class Explanation:
                      and not (c.kind == "moved" and c.shift_length_px <= max_shift_px))
 
 
+def check_tolerances(ignore, max_shift_px: float) -> tuple:
+    """`ignore` as a tuple, each entry checked (a kind, an FDI number, "tooth 13", "contact 13-14"), and
+    `max_shift_px` checked; a one-line ImageInputError names the first that is neither."""
+    import re
+
+    from orthosim.model.fdi import is_fdi
+
+    from orthosim_render.imgdiff import ImageInputError
+    from orthosim_render.labels import KINDS
+
+    if isinstance(ignore, (str, int)):
+        ignore = (ignore,)
+    for item in ignore:
+        ok = (is_fdi(item) if isinstance(item, int) and not isinstance(item, bool) else
+              isinstance(item, str) and (item in KINDS or item == "background" or re.fullmatch(r"tooth \d\d", item)
+                                         or re.fullmatch(r"contact \d\d-\d\d", item)))
+        if not ok:
+            raise ImageInputError(None, "ignore", f"{item!r} names no label",
+                                  "give a kind (tooth, contact, marker, gingiva, background), an FDI number such as 13, "
+                                  "'tooth 13' or 'contact 13-14'")
+    if not (isinstance(max_shift_px, (int, float)) and 0 <= max_shift_px < float("inf")):
+        raise ImageInputError(None, "max_shift_px", f"{max_shift_px!r} is not a number of pixels >= 0", "give e.g. 1")
+    return tuple(ignore)
+
+
 def matches(key: tuple, ignore) -> bool:
     """Whether `key` (("tooth", 13), ("contact", 13, 14), ...) is named by an entry of `ignore`."""
     for item in ignore:
@@ -161,6 +186,8 @@ def _integer_shift(mg: np.ndarray, mc: np.ndarray) -> tuple[int, int]:
 
 
 def _interior(mask: np.ndarray) -> np.ndarray:
+    """The pixels two rings inside the silhouette: their depth is the thing's own surface, and so is
+    that of every neighbour the depth gradient reads."""
     from scipy.ndimage import binary_erosion
 
     return binary_erosion(mask, iterations=2)
@@ -239,6 +266,8 @@ def _explain_one(key, golden, candidate, g_image, c_image, colour_level) -> Chan
         if _significant(gained if ng == 0 else lost, max(ng, nc)):
             return Change(subject, key, "appeared" if ng == 0 else "disappeared", area_px=(ng, nc))
         return None
+    if key[0] == "contact" and gk is not None and ck is not None and gk.center_mm and ck.center_mm:
+        return _contact_change(subject, key, golden, gk, ck, (ng, nc), gained + lost)
     shift, offset = _refine_shift(_integer_shift(mg, mc), golden, candidate, mg, mc)
     if np.hypot(*shift) >= MIN_SHIFT_PX or (abs(offset) >= MIN_DEPTH_SHIFT_MM and _significant(gained + lost, ng)):
         rows, cols = np.nonzero(mg)
@@ -254,6 +283,24 @@ def _explain_one(key, golden, candidate, g_image, c_image, colour_level) -> Chan
     level = np.abs(g_image[..., :3].astype(np.int16) - c_image[..., :3].astype(np.int16)).max(axis=-1)
     if _significant(int((level[both] > colour_level).sum()), ng):
         return Change(subject, key, "changed colour", area_px=(ng, nc))
+    return None
+
+
+def _contact_change(subject, key, golden: LabelFrame, gk: LabelEntry, ck: LabelEntry, area, unexplained) -> Change | None:
+    """A contact patch in both images: moved (its spheres' mean centre, when their number is the
+    same), else grew or shrank (its visible area), else its visible pixels changed shape."""
+    ng, nc = area
+    a, b = np.asarray(gk.center_mm), np.asarray(ck.center_mm)
+    move = b - a
+    if gk.spheres == ck.spheres and np.linalg.norm(move) >= MIN_DEPTH_SHIFT_MM:
+        shift = golden.camera.pixel_of(b) - golden.camera.pixel_of(a)
+        if np.hypot(*shift) >= MIN_SHIFT_PX or abs(move[2]) >= MIN_DEPTH_SHIFT_MM:
+            return Change(subject, key, "moved", (round(float(shift[0]), 3), round(float(shift[1]), 3)),
+                          round(float(np.hypot(*move[:2])), 3), round(float(move[2]), 3), None, area)
+    if abs(nc - ng) > AREA_CHANGE * max(ng, 1) and _significant(unexplained, max(ng, nc)):
+        return Change(subject, key, "grew" if nc > ng else "shrank", area_px=area)
+    if gk.spheres != ck.spheres or _significant(unexplained, max(ng, nc)):
+        return Change(subject, key, "changed shape", area_px=area)
     return None
 
 

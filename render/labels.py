@@ -47,7 +47,9 @@ class LabelEntry:
 
     `mesial`, `occlusal`, `facial`: unit (3,) vectors in the camera frame of the image (x along the
     image's columns, y down its rows, z away from the camera), the directions in which the tooth
-    would move mesially, occlusally (incisally) and facially (labially or buccally).
+    would move mesially, occlusally (incisally) and facially (labially or buccally). For a contact,
+    `center_mm`: the mean centre of the contact spheres drawn for it, in that camera frame (mm), and
+    `spheres`: how many were drawn (hidden ones included: the patch is the contact, not what shows).
     """
 
     id: int
@@ -56,6 +58,8 @@ class LabelEntry:
     mesial: tuple[float, float, float] | None = None
     occlusal: tuple[float, float, float] | None = None
     facial: tuple[float, float, float] | None = None
+    center_mm: tuple[float, float, float] | None = None
+    spheres: int | None = None
 
     @property
     def key(self) -> tuple:
@@ -72,10 +76,12 @@ class LabelEntry:
 
     def to_json(self) -> dict:
         data = {"id": self.id, "kind": self.kind, "teeth": list(self.teeth)}
-        for axis in ("mesial", "occlusal", "facial"):
+        for axis in ("mesial", "occlusal", "facial", "center_mm"):
             value = getattr(self, axis)
             if value is not None:
                 data[axis] = [round(float(v), 6) for v in value]
+        if self.spheres is not None:
+            data["spheres"] = self.spheres
         return data
 
     @classmethod
@@ -92,13 +98,16 @@ class LabelEntry:
         if not isinstance(teeth, list) or len(teeth) != want or not all(is_fdi(t) for t in teeth):
             raise bad("teeth", f"of label {data['id']} ({kind}) is {teeth!r}, not {want} FDI number(s)")
         axes = {}
-        for axis in ("mesial", "occlusal", "facial"):
+        spheres = data.get("spheres")
+        if spheres is not None and (not isinstance(spheres, int) or spheres < 0):
+            raise bad("spheres", f"of label {data['id']} is {spheres!r}, not a count")
+        for axis in ("mesial", "occlusal", "facial", "center_mm"):
             value = data.get(axis)
             if value is not None and not (isinstance(value, list) and len(value) == 3
                                           and all(isinstance(v, (int, float)) for v in value)):
                 raise bad(axis, f"of label {data['id']} is {value!r}, not [x, y, z] in the camera frame")
             axes[axis] = tuple(float(v) for v in value) if value is not None else None
-        return cls(data["id"], kind, tuple(teeth), **axes)
+        return cls(data["id"], kind, tuple(teeth), spheres=spheres, **axes)
 
 
 @dataclass(frozen=True)
@@ -112,6 +121,12 @@ class LabelCamera:
     def mm_per_px(self, depth_mm) -> np.ndarray:
         """Size in mm, in the view plane, of one pixel at distance `depth_mm` (mm along the view axis)."""
         return 2.0 * np.asarray(depth_mm, float) * np.tan(self.yfov / 2) / self.size[1]
+
+    def pixel_of(self, point_mm) -> np.ndarray:
+        """(2,) (column, row) pixel index of a (3,) camera-frame point (mm: x right, y down, z away)."""
+        p = np.asarray(point_mm, float)
+        centre = np.array([self.size[0] / 2 - 0.5, self.size[1] / 2 - 0.5])
+        return centre + p[:2] / (self.mm_per_px(1.0) * p[2])
 
     def displacement_mm(self, pixel: tuple[float, float], depth_mm: float, shift_px, shift_depth_mm: float) -> np.ndarray:
         """(3,) mm in the camera frame (x right, y down, z away): the move of the surface point seen at
@@ -163,9 +178,10 @@ def _nearest_distance(scene, fdi: int, points: np.ndarray) -> np.ndarray:
     return tree.query(local, distance_upper_bound=NEAR_MM)[0]
 
 
-def _set_marker_ids(scene) -> list[tuple[int, int]]:
+def _set_marker_ids(scene) -> list[tuple[tuple[int, int], np.ndarray, int]]:
     """Give each contact sprite the scene draws its label id (texture coordinate y, which the colour
-    shader does not read) and return the pairs of teeth numbered from FIRST_CONTACT_ID."""
+    shader does not read); for each pair of teeth, numbered from FIRST_CONTACT_ID: (the pair, the mean
+    centre of its spheres in the labels' camera frame (mm), how many)."""
     if not scene.marker_mesh.is_visible or scene.marker_style != "sprite":
         return []  # instanced sphere markers are one node: labelled MARKER_ID as a whole
     centers = np.asarray(scene.markers._positions, np.float32)
@@ -175,7 +191,13 @@ def _set_marker_ids(scene) -> list[tuple[int, int]]:
         tex[:, 1] = ids
         scene.markers._texcoord_0 = tex
         scene.buffer_versions[scene.markers] = scene.buffer_versions.get(scene.markers, 0) + 1
-    return pairs
+    pose = scene.current_view.pose
+    camera = (centers.astype(float) - pose[:3, 3]) @ pose[:3, :3] * np.array([1.0, -1.0, -1.0])
+    out = []
+    for k, pair in enumerate(pairs):
+        mine = ids == FIRST_CONTACT_ID + k
+        out.append((pair, camera[mine].mean(axis=0) if mine.any() else np.zeros(3), int(mine.sum())))
+    return out
 
 
 def _marker_ids(scene, centers: np.ndarray) -> tuple[np.ndarray, list[tuple[int, int]]]:
@@ -229,7 +251,9 @@ def render_labelled(renderer, scene, view: str | None = None) -> tuple[np.ndarra
         if label == MARKER_ID:
             legend.append(LabelEntry(label, "marker"))
         elif label >= FIRST_CONTACT_ID:
-            legend.append(LabelEntry(label, "contact", pairs[label - FIRST_CONTACT_ID]))
+            pair, center, count = pairs[label - FIRST_CONTACT_ID]
+            legend.append(LabelEntry(label, "contact", pair, center_mm=tuple(round(float(v), 6) for v in center),
+                                     spheres=count))
         else:
             legend.append(LabelEntry(label, "tooth", (label,), **axes[label]))
     return image, LabelFrame(labels, depth_mm, tuple(legend), camera)
