@@ -126,7 +126,7 @@ def check_tolerances(ignore, max_shift_px: float) -> tuple:
 
     from orthosim.model.fdi import is_fdi
 
-    from orthosim_render.imgdiff import ImageInputError
+    from orthosim_render.imageerrors import ImageInputError
     from orthosim_render.labels import KINDS
 
     if isinstance(ignore, (str, int)):

@@ -28,8 +28,8 @@ import numpy as np
 
 from orthosim import __version__
 from orthosim.storage.atomic import write_bytes, write_json
-from orthosim.errors import OrthosimError
 
+from orthosim_render.imageerrors import ImageInputError  # defined apart (no import cycle), still imgdiff.ImageInputError
 from orthosim_render.png import encode_png
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -37,10 +37,6 @@ DIFF_COLOUR = (255, 0, 220)  # differences beyond tolerance: a magenta no lit to
 WITHIN_COLOUR = (60, 150, 255)  # differences within tolerance (tolerance mode only): a quieter blue
 TOLERATED_COLOUR = (235, 200, 40)  # differences left out by label (a tolerated shift, an ignored kind): amber
 BOX_MARGIN = 4  # px: the box drawn around all differences, so that a single changed pixel is found
-
-
-class ImageInputError(OrthosimError):
-    """A golden or candidate image (or its sidecar) is missing, unreadable, truncated, not a PNG, or of another size."""
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ import numpy as np
 from orthosim.model.fdi import is_fdi, quadrant, tooth_type
 from orthosim.storage.atomic import write_bytes, write_json
 
-from orthosim_render.imgdiff import ImageInputError
+from orthosim_render.imageerrors import ImageInputError
 
 LABELS_FORMAT = "orthosim-labels/1"
 BACKGROUND_ID = 0
