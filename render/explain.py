@@ -242,7 +242,7 @@ def _direction(entry: LabelEntry | None, move_mm: np.ndarray) -> str | None:
 
 
 # ------------------------------------------------------------------------------------- changes
-def _unexplained(key, golden: LabelFrame, candidate: LabelFrame, mg, mc) -> tuple[int, int]:
+def _unexplained(golden: LabelFrame, candidate: LabelFrame, mg, mc) -> tuple[int, int]:
     """(pixels gained, pixels lost) that no occlusion accounts for, plus depth changes where shown in both."""
     zg, zc = golden.depth_mm, candidate.depth_mm
     with np.errstate(invalid="ignore"):
@@ -261,7 +261,7 @@ def _explain_one(key, golden, candidate, g_image, c_image, colour_level) -> Chan
     mg, mc = golden.mask(key), candidate.mask(key)
     ng, nc = int(mg.sum()), int(mc.sum())
     subject = _subject(key)
-    gained, lost = _unexplained(key, golden, candidate, mg, mc)
+    gained, lost = _unexplained(golden, candidate, mg, mc)
     if ng == 0 or nc == 0:
         if _significant(gained if ng == 0 else lost, max(ng, nc)):
             return Change(subject, key, "appeared" if ng == 0 else "disappeared", area_px=(ng, nc))

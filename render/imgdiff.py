@@ -310,6 +310,11 @@ def compare_labelled(golden: np.ndarray, candidate: np.ndarray, golden_sidecar: 
     explanation = mask = None
     asked = bool(ignore) or max_shift_px > 0
     same_size = np.shape(golden)[:2] == np.shape(candidate)[:2]
+    notes = ()
+    if golden_labels is not None and candidate_labels is not None and golden_labels.camera != candidate_labels.camera:
+        notes = (f"the labels were drawn from other cameras ({golden_labels.camera.view} vs "
+                 f"{candidate_labels.camera.view}), so only pixels were compared",)
+        golden_labels = candidate_labels = None
     if golden_labels is not None and candidate_labels is not None and same_size:
         g3, c3 = _same_channels(golden, candidate)
         if not np.array_equal(g3, c3):
@@ -319,6 +324,7 @@ def compare_labelled(golden: np.ndarray, candidate: np.ndarray, golden_sidecar: 
             if asked:
                 mask = explanation.tolerated_mask(np.shape(golden)[:2], ignore, max_shift_px)
     comparison = compare_images(golden, candidate, golden_sidecar, candidate_sidecar, tolerance, names, mask)
+    comparison = dataclasses.replace(comparison, notes=comparison.notes + notes) if notes else comparison
     if asked and (golden_labels is None or candidate_labels is None):
         side = names[0] if golden_labels is None else names[1]
         comparison = dataclasses.replace(comparison, notes=comparison.notes + (
