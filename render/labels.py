@@ -173,9 +173,15 @@ def _nearest_distance(scene, fdi: int, points: np.ndarray) -> np.ndarray:
     tree = _vertex_trees.get(tooth)
     if tree is None:
         tree = _vertex_trees[tooth] = cKDTree(tooth.mesh.vertices)
-    pose = np.asarray(scene.teeth[fdi].node._matrix, float)
+    drawable = scene.teeth[fdi]
+    pose = np.asarray(drawable.node._matrix, float)
     local = (points - pose[:3, 3]) @ pose[:3, :3]
-    return tree.query(local, distance_upper_bound=NEAR_MM)[0]
+    distance = np.full(len(points), np.inf)
+    # only the spheres within reach of the tooth's bounding sphere are looked up in its tree
+    near = np.linalg.norm(local - drawable.center_local, axis=1) <= drawable.radius_local + NEAR_MM
+    if near.any():
+        distance[near] = tree.query(local[near], distance_upper_bound=NEAR_MM)[0]
+    return distance
 
 
 def _set_marker_ids(scene) -> list[tuple[tuple[int, int], np.ndarray, int]]:
@@ -244,7 +250,7 @@ def render_labelled(renderer, scene, view: str | None = None) -> tuple[np.ndarra
     ndc = 2.0 * window.astype(np.float64) - 1.0
     depth = 2.0 * v.znear * v.zfar / (v.zfar + v.znear - ndc * (v.zfar - v.znear))
     depth_mm = np.where(window < 1.0, depth, np.nan).astype(np.float32)
-    present = sorted(set(np.unique(labels).tolist()) - {BACKGROUND_ID})
+    present = [int(i) for i in np.flatnonzero(np.bincount(labels.ravel())) if i != BACKGROUND_ID]
     axes = _tooth_axes(scene, [label for label in present if label in scene.teeth])
     legend = []
     for label in present:
