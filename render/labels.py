@@ -164,23 +164,29 @@ _vertex_trees: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()  # Toot
 NEAR_MM = 3.0  # a contact sphere farther than this from a tooth's surface is not that tooth's contact
 
 
-def _nearest_distance(scene, fdi: int, points: np.ndarray) -> np.ndarray:
-    """(n,) mm: from each arch-frame point to the nearest vertex of tooth `fdi` as posed in the scene
-    (inf beyond NEAR_MM: the query stops there)."""
+def _local(scene, fdi: int, points: np.ndarray) -> np.ndarray:
+    pose = np.asarray(scene.teeth[fdi].node._matrix, float)
+    return (points - pose[:3, 3]) @ pose[:3, :3]
+
+
+def _within_reach(scene, fdi: int, points: np.ndarray) -> np.ndarray:
+    """(n,) bool: the arch-frame points inside tooth `fdi`'s bounding sphere grown by NEAR_MM."""
+    drawable = scene.teeth[fdi]
+    return np.linalg.norm(_local(scene, fdi, points) - drawable.center_local, axis=1) <= drawable.radius_local + NEAR_MM
+
+
+def _nearest_distance(scene, fdi: int, points: np.ndarray, which: np.ndarray) -> np.ndarray:
+    """(n,) mm: from each arch-frame point picked by `which` to the nearest vertex of tooth `fdi` as
+    posed in the scene; inf for the others and beyond NEAR_MM (the query stops there)."""
     from scipy.spatial import cKDTree
 
     tooth = scene.dentition.teeth[fdi]
     tree = _vertex_trees.get(tooth)
     if tree is None:
         tree = _vertex_trees[tooth] = cKDTree(tooth.mesh.vertices)
-    drawable = scene.teeth[fdi]
-    pose = np.asarray(drawable.node._matrix, float)
-    local = (points - pose[:3, 3]) @ pose[:3, :3]
     distance = np.full(len(points), np.inf)
-    # only the spheres within reach of the tooth's bounding sphere are looked up in its tree
-    near = np.linalg.norm(local - drawable.center_local, axis=1) <= drawable.radius_local + NEAR_MM
-    if near.any():
-        distance[near] = tree.query(local[near], distance_upper_bound=NEAR_MM)[0]
+    if which.any():
+        distance[which] = tree.query(_local(scene, fdi, points[which]), distance_upper_bound=NEAR_MM)[0]
     return distance
 
 
@@ -214,9 +220,18 @@ def _marker_ids(scene, centers: np.ndarray) -> tuple[np.ndarray, list[tuple[int,
     if not len(centers) or not pairs:
         return np.full(len(centers), MARKER_ID, np.float32), []
     points = centers.astype(float)
-    distance = {t: _nearest_distance(scene, t, points) for t in {t for p in pairs for t in p}}
-    cost = np.stack([distance[a] + distance[b] for a, b in pairs], axis=1)
-    return (FIRST_CONTACT_ID + cost.argmin(axis=1)).astype(np.float32), pairs
+    teeth = {t for p in pairs for t in p}
+    reach = {t: _within_reach(scene, t, points) for t in teeth}
+    need = {t: np.zeros(len(points), bool) for t in teeth}
+    for a, b in pairs:  # a tooth's tree is asked only about spheres that both teeth of a pair reach
+        both = reach[a] & reach[b]
+        need[a] |= both
+        need[b] |= both
+    distance = {t: _nearest_distance(scene, t, points, need[t]) for t in teeth}
+    cost = np.stack([np.where(reach[a] & reach[b], distance[a] + distance[b], np.inf) for a, b in pairs], axis=1)
+    ids = (FIRST_CONTACT_ID + cost.argmin(axis=1)).astype(np.float32)
+    ids[~np.isfinite(cost.min(axis=1))] = MARKER_ID  # near no listed pair
+    return ids, pairs
 
 
 def _tooth_axes(scene, fdis: list[int]) -> dict[int, dict]:
