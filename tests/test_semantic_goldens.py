@@ -217,6 +217,15 @@ def test_imgdiff_prints_what_changed_when_both_images_carry_labels(tmp_path, mov
     assert r.returncode == 0 and "pixels left out by label" in r.stdout
 
 
+def test_imgdiff_refuses_a_tolerance_naming_no_label_in_one_line(tmp_path, moved_13):
+    golden, candidate = write_pair(tmp_path, *moved_13)
+    r = orthosim("imgdiff", str(golden), str(candidate), "--ignore", "gingva")
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr.strip().splitlines() == [
+        "orthosim: error: ignore: 'gingva' names no label (fix: give a kind (tooth, contact, marker, gingiva, "
+        "background), an FDI number such as 13, 'tooth 13' or 'contact 13-14')"]
+
+
 @pytest.mark.parametrize("side", ["golden", "candidate"])
 def test_a_golden_or_candidate_without_labels_compares_pixels_as_before(tmp_path, moved_13, side):
     golden, candidate = write_pair(tmp_path, *moved_13, with_labels=(side != "golden", side != "candidate"))
