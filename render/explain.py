@@ -34,6 +34,7 @@ MIN_SHIFT_PX = 0.25  # a smaller shift is rasterisation noise, not a move
 MIN_DEPTH_SHIFT_MM = 0.05
 SEARCH_PX = 48  # largest shift looked for, px
 AREA_CHANGE = 0.10  # a contact patch grew or shrank when its visible area changed by more (fraction)
+WAS_COLOUR, NOW_COLOUR, BOTH_COLOUR = (40, 170, 255), (255, 140, 0), (200, 200, 200)  # `Explanation.picture`
 MIN_AXIS_FRACTION = 0.35  # a dental direction is named when the move along it is at least this share of the largest
 
 
@@ -84,7 +85,7 @@ class Explanation:
     changes: tuple[Change, ...]
     unchanged_teeth: int
     unchanged_contacts: int
-    masks: dict = field(default_factory=dict, repr=False, compare=False)  # key -> (h, w) bool, both sides' pixels
+    masks: dict = field(default_factory=dict, repr=False, compare=False)  # key -> ((h, w) bool golden, candidate)
 
     def text(self) -> str:
         parts = [c.text() for c in self.changes]
@@ -105,13 +106,28 @@ class Explanation:
         thing that only moved, by at most this many pixels, is left out too.
         """
         mask = np.zeros(shape, bool)
-        for key, pixels in self.masks.items():
+        for key, (in_golden, in_candidate) in self.masks.items():
             if matches(key, ignore):
-                mask |= pixels
+                mask |= in_golden | in_candidate
         for change in self.changes:
             if change.kind == "moved" and change.shift_length_px <= max_shift_px and change.key in self.masks:
-                mask |= self.masks[change.key]
+                mask |= self.masks[change.key][0] | self.masks[change.key][1]
         return mask
+
+    def picture(self, golden_image: np.ndarray) -> np.ndarray:
+        """(h, w, 3) uint8: the golden, greyed, with each changed thing where it was (WAS_COLOUR) and
+        where it is now (NOW_COLOUR; both where it overlaps itself), for a reader to see what the text says."""
+        rgb = np.asarray(golden_image)[..., :3].astype(np.float32)
+        grey = (60 + 0.45 * (rgb @ np.array([0.299, 0.587, 0.114], np.float32))).astype(np.uint8)
+        out = np.repeat(grey[:, :, None], 3, axis=2)
+        for change in self.changes:
+            if change.key not in self.masks or change.key == ("background",):
+                continue
+            was, now = self.masks[change.key]
+            out[was & ~now] = WAS_COLOUR
+            out[now & ~was] = NOW_COLOUR
+            out[was & now] = BOTH_COLOUR
+        return out
 
     def untolerated(self, ignore=(), max_shift_px: float = 0.0) -> tuple[Change, ...]:
         """The changes these tolerances do not allow."""
@@ -315,14 +331,14 @@ def explain(golden_image: np.ndarray, golden: LabelFrame, candidate_image: np.nd
     changes, masks = [], {}
     unchanged = {"tooth": 0, "contact": 0}
     for key in keys:
-        masks[key] = golden.mask(key) | candidate.mask(key)
+        masks[key] = (golden.mask(key), candidate.mask(key))
         change = _explain_one(key, golden, candidate, golden_image, candidate_image, colour_level)
         if change is not None:
             changes.append(change)
         elif key[0] in unchanged:
             unchanged[key[0]] += 1
     empty = (golden.labels == 0) & (candidate.labels == 0)
-    masks[("background",)] = empty
+    masks[("background",)] = (empty, empty)
     level = np.abs(golden_image[..., :3].astype(np.int16) - candidate_image[..., :3].astype(np.int16)).max(axis=-1)
     if _significant(int((level[empty] > colour_level).sum()), int(empty.sum())):
         changes.append(Change("background", ("background",), "changed colour", area_px=(int(empty.sum()),) * 2))

@@ -92,13 +92,13 @@ def test_the_page_is_self_contained_and_loads_clean_in_headless_chromium(session
     _, results, _ = session_with_two_failures
     page = (results / "index.html").read_text()
     assert "tooth 41 disappeared" in page and "tooth 13 moved" in page
-    assert "src=\"http" not in page and page.count("data:image/png;base64,") == 6  # golden, candidate, diff x 2
+    assert "src=\"http" not in page and page.count("data:image/png;base64,") == 8  # golden, candidate, diff, what changed x 2
     try:
         find_chromium()
     except BrowserError:
         pytest.skip("headless Chromium is not installed")
     loaded = load_page(results / "index.html", window=(1400, 1500))
-    assert loaded.problems == [] and loaded.images == 6
+    assert loaded.problems == [] and loaded.images == 8
     (tmp_path / "page.png").write_bytes(loaded.screenshot_png)
     assert loaded.screenshot_png.startswith(b"\x89PNG")
 

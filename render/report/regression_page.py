@@ -37,6 +37,7 @@ class CheckRecord:
     golden_png: bytes | None
     candidate_png: bytes
     diff_png: bytes | None  # the differences panel alone
+    changes_png: bytes | None = None  # each changed thing where it was and where it is (labels on both sides)
 
     @classmethod
     def of(cls, test: str, status: str, golden: Path, reference, candidate, comparison=None, explanation=None,
@@ -62,13 +63,16 @@ class CheckRecord:
                        "ssim": None if np.isnan(comparison.ssim) else round(comparison.ssim, 5)}
         summary = comparison.summary() if comparison is not None else (
             "golden written (there was none)" if status == "new" else "golden rewritten")
+        changes = None
+        if explanation is not None and explanation.changes and reference is not None:
+            changes = encode_png(np.ascontiguousarray(explanation.picture(reference)))
         return cls(test, str(golden), status, summary, explanation.to_json() if explanation is not None else None,
                    figures, encode_png(np.ascontiguousarray(reference, np.uint8)) if reference is not None else None,
-                   encode_png(candidate), diff)
+                   encode_png(candidate), diff, changes)
 
     def to_json(self) -> dict:
         data = asdict(self)
-        for name in ("golden_png", "candidate_png", "diff_png"):
+        for name in ("golden_png", "candidate_png", "diff_png", "changes_png"):
             data.pop(name)
         return data
 
@@ -85,7 +89,8 @@ def render_page(records: list[CheckRecord], created: str) -> str:
                       autoescape=select_autoescape(["html", "j2"]), undefined=StrictUndefined,
                       trim_blocks=True, lstrip_blocks=True)
     checks = [{"record": r, "anchor": f"check-{i}", "golden_uri": _data_uri(r.golden_png),
-               "candidate_uri": _data_uri(r.candidate_png), "diff_uri": _data_uri(r.diff_png)}
+               "candidate_uri": _data_uri(r.candidate_png), "diff_uri": _data_uri(r.diff_png),
+               "changes_uri": _data_uri(r.changes_png)}
               for i, r in enumerate(records, 1)]
     counts = {status: sum(r.status == status for r in records) for status in ("failed", "regenerated", "new")}
     return env.get_template("regression.html.j2").render(checks=checks, counts=counts, created=created,
