@@ -405,8 +405,9 @@ def imgdiff(golden_path: str | Path, candidate_path: str | Path, *, diff_path: s
     `diff_path` when given, else beside the candidate when the images differ. `update` makes the
     candidate the golden (PNG, sidecar and labels), reporting what the comparison found first.
     When both images carry labels (`orthosim_render.labels`) and differ, the outcome also says what
-    changed, thing by thing (`orthosim_render.explain`); a label file that is damaged or belongs to
-    other pixels is refused (ImageInputError), never half-used.
+    changed, thing by thing (`orthosim_render.explain`), and DIFF.json beside the diff image holds the
+    same; a label file that is damaged or belongs to other pixels is refused (ImageInputError), never
+    half-used.
     """
     from orthosim_render.labels import read_labels
 
@@ -440,6 +441,8 @@ def imgdiff(golden_path: str | Path, candidate_path: str | Path, *, diff_path: s
     written = None
     if diff_path is not None or not comparison.matched:
         written = write_diff_image(diff_path or default_diff_path(candidate_path), golden, candidate, comparison, mask)
+        if explanation is not None:  # what changed, for a machine, beside the diff image (DIFF.json)
+            write_json(written.with_suffix(".json"), {"summary": comparison.summary(), **explanation.to_json()})
     line = comparison.summary() + (f" -> {written}" if written else "")
     if update:
         write_golden(golden_path, candidate, candidate_gl() or GoldenSidecar(), candidate_labels)

@@ -184,7 +184,12 @@ class ImageRegression:
             write_labels(obtained, labels, pixels)
         write_bytes(obtained, encode_png(np.ascontiguousarray(pixels)))
         diff = imgdiff.write_diff_image(self._tmp_path / f"{golden.stem}.diff.png", reference, pixels, comparison, mask)
-        changed = f"; what changed: {explanation.text()}" if explanation is not None else ""
+        changed = ""
+        if explanation is not None:  # the same, for a machine, beside the diff image
+            from orthosim.storage.atomic import write_json
+
+            write_json(diff.with_suffix(".json"), {"summary": comparison.summary(), **explanation.to_json()})
+            changed = f"; what changed: {explanation.text()}"
         message = f"{golden}: {comparison.summary()}{changed}; diff image: {diff}; candidate: {obtained}"
         regen = self._config.option.orthosim_force_regen
         self._record("regenerated" if regen else "failed", golden, reference, pixels, comparison, explanation, mask)

@@ -213,6 +213,8 @@ def test_imgdiff_prints_what_changed_when_both_images_carry_labels(tmp_path, mov
     assert verdict.startswith("differ (exact: ")
     assert changed.startswith("what changed: tooth 13 moved ") and " distally" in changed
     assert changed.endswith(" other teeth unchanged")
+    written = json.loads((tmp_path / "candidate.diff.json").read_text())
+    assert written["text"] == changed.removeprefix("what changed: ") and written["changes"][0]["subject"] == "tooth 13"
     r = orthosim("imgdiff", str(golden), str(candidate), "--max-shift-px", "2")
     assert r.returncode == 0 and "pixels left out by label" in r.stdout
 
