@@ -98,19 +98,21 @@ class Explanation:
         return {"text": self.text(), "changes": [c.to_json() for c in self.changes],
                 "unchanged_teeth": self.unchanged_teeth, "unchanged_contacts": self.unchanged_contacts}
 
-    def tolerated_mask(self, shape: tuple[int, int], ignore=(), max_shift_px: float = 0.0) -> np.ndarray:
+    def tolerated_mask(self, shape: tuple[int, int], ignore=(), max_shift_px=0.0) -> np.ndarray:
         """(h, w) bool: the pixels a comparison may leave out under these tolerances.
 
         `ignore`: kinds ("tooth", "contact", "marker", "gingiva", "background") and teeth (FDI numbers,
         or "tooth 13", "contact 13-14") whose pixels, in either image, are left out; `max_shift_px`: a
-        thing that only moved, by at most this many pixels, is left out too.
+        thing that only moved, by at most this many pixels, is left out too; a mapping gives each
+        kind or tooth its own limit (e.g. {"contact": 2, 13: 1}; the first entry naming a thing counts,
+        things it does not name get 0).
         """
         mask = np.zeros(shape, bool)
         for key, (in_golden, in_candidate) in self.masks.items():
             if matches(key, ignore):
                 mask |= in_golden | in_candidate
         for change in self.changes:
-            if change.kind == "moved" and change.shift_length_px <= max_shift_px and change.key in self.masks:
+            if _tolerated_move(change, max_shift_px) and change.key in self.masks:
                 mask |= self.masks[change.key][0] | self.masks[change.key][1]
         return mask
 
@@ -129,15 +131,27 @@ class Explanation:
             out[was & now] = BOTH_COLOUR
         return out
 
-    def untolerated(self, ignore=(), max_shift_px: float = 0.0) -> tuple[Change, ...]:
+    def untolerated(self, ignore=(), max_shift_px=0.0) -> tuple[Change, ...]:
         """The changes these tolerances do not allow."""
         return tuple(c for c in self.changes if not matches(c.key, ignore)
-                     and not (c.kind == "moved" and c.shift_length_px <= max_shift_px))
+                     and not _tolerated_move(c, max_shift_px))
 
 
-def check_tolerances(ignore, max_shift_px: float) -> tuple:
+def _tolerated_move(change: Change, max_shift_px) -> bool:
+    """Whether `change` is a move within its limit (a number, or a mapping label -> px; see tolerated_mask)."""
+    if change.kind != "moved":
+        return False
+    if isinstance(max_shift_px, dict):
+        limit = next((px for name, px in max_shift_px.items() if matches(change.key, (name,))), 0.0)
+    else:
+        limit = max_shift_px
+    return change.shift_length_px <= limit
+
+
+def check_tolerances(ignore, max_shift_px) -> tuple:
     """`ignore` as a tuple, each entry checked (a kind, an FDI number, "tooth 13", "contact 13-14"), and
-    `max_shift_px` checked; a one-line ImageInputError names the first that is neither."""
+    `max_shift_px` (px, or a mapping of such entries to px) checked; a one-line ImageInputError names
+    the first that is neither."""
     import re
 
     from orthosim.model.fdi import is_fdi
@@ -147,7 +161,8 @@ def check_tolerances(ignore, max_shift_px: float) -> tuple:
 
     if isinstance(ignore, (str, int)):
         ignore = (ignore,)
-    for item in ignore:
+    limits = max_shift_px if isinstance(max_shift_px, dict) else {}
+    for item in (*ignore, *limits):
         ok = (is_fdi(item) if isinstance(item, int) and not isinstance(item, bool) else
               isinstance(item, str) and (item in KINDS or item == "background" or re.fullmatch(r"tooth \d\d", item)
                                          or re.fullmatch(r"contact \d\d-\d\d", item)))
@@ -155,8 +170,10 @@ def check_tolerances(ignore, max_shift_px: float) -> tuple:
             raise ImageInputError(None, "ignore", f"{item!r} names no label",
                                   "give a kind (tooth, contact, marker, gingiva, background), an FDI number such as 13, "
                                   "'tooth 13' or 'contact 13-14'")
-    if not (isinstance(max_shift_px, (int, float)) and 0 <= max_shift_px < float("inf")):
-        raise ImageInputError(None, "max_shift_px", f"{max_shift_px!r} is not a number of pixels >= 0", "give e.g. 1")
+    for value in limits.values() if limits else (max_shift_px,):
+        if not (isinstance(value, (int, float)) and not isinstance(value, bool) and 0 <= value < float("inf")):
+            raise ImageInputError(None, "max_shift_px", f"{value!r} is not a number of pixels >= 0",
+                                  "give e.g. 1, or {'contact': 2, 13: 1}")
     return tuple(ignore)
 
 

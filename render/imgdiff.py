@@ -295,12 +295,13 @@ def compare_images(golden: np.ndarray, candidate: np.ndarray, golden_sidecar: Go
 
 def compare_labelled(golden: np.ndarray, candidate: np.ndarray, golden_sidecar: GoldenSidecar | None,
                      candidate_sidecar: GoldenSidecar | None, tolerance: Tolerance, names: tuple[str, str],
-                     golden_labels=None, candidate_labels=None, ignore=(), max_shift_px: float = 0.0):
+                     golden_labels=None, candidate_labels=None, ignore=(), max_shift_px=0.0):
     """`compare_images`, plus what changed when both images carry labels: (Comparison, Explanation or
     None, the mask of pixels left out or None).
 
     `ignore` (kinds such as "gingiva" or "contact", FDI numbers, "tooth 13", "contact 13-14") and
-    `max_shift_px` (a thing that only moved this far is tolerated) leave those things' pixels out of
+    `max_shift_px` (px: a thing that only moved this far is tolerated; or a mapping such as
+    {"contact": 2, 13: 1}, see `Explanation.tolerated_mask`) leave those things' pixels out of
     the verdict; they need labels on both sides, and without them every pixel is compared (a note
     says so).
     """
@@ -308,7 +309,7 @@ def compare_labelled(golden: np.ndarray, candidate: np.ndarray, golden_sidecar: 
 
     ignore = check_tolerances(ignore, max_shift_px)
     explanation = mask = None
-    asked = bool(ignore) or max_shift_px > 0
+    asked = bool(ignore) or bool(max_shift_px)
     same_size = np.shape(golden)[:2] == np.shape(candidate)[:2]
     notes = ()
     if golden_labels is not None and candidate_labels is not None and golden_labels.camera != candidate_labels.camera:

@@ -98,7 +98,7 @@ class ImageRegression:
         return self.golden_dir / f"{basename}.png"
 
     def check(self, image, name: str | None = None, *, max_level: int = 3, max_fraction: float = 0.001,
-              ignore=(), max_shift_px: float = 0.0) -> None:
+              ignore=(), max_shift_px=0.0) -> None:
         """Compare `image` with the golden `name` (default: the test's name); fail with the diff image's path.
 
         `image`: a `orthosim_render.regression.RenderedFrame` (its sidecar says what drew it, its labels
@@ -107,7 +107,8 @@ class ImageRegression:
         The mode (exact or within `max_level` levels on at most `max_fraction` of the pixels) comes
         from the sidecars, as for `orthosim imgdiff`. With labels on both sides a failure says what
         changed, and `ignore` (kinds, FDI numbers, "contact 13-14") and `max_shift_px` leave the
-        pixels of those things, or of things that only moved that far, out of the verdict.
+        pixels of those things, or of things that only moved that far, out of the verdict
+        (`max_shift_px` may map kinds or teeth to their own limits: {"contact": 2, 13: 1}).
         """
         __tracebackhide__ = True
         from orthosim_render import imgdiff

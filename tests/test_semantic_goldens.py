@@ -189,12 +189,17 @@ def test_tolerances_by_label_pass_only_the_change_they_name(moved_13):
     assert verdict(ignore=[13]).matched and verdict(ignore=["tooth"]).matched
     assert not verdict(ignore=[14]).matched and not verdict(ignore=["contact", "gingiva"]).matched
     assert verdict(max_shift_px=2.0).masked_pixels > 0
+    assert verdict(max_shift_px={13: 2.0}).matched and verdict(max_shift_px={"tooth": 2.0}).matched
+    assert not verdict(max_shift_px={14: 2.0}).matched and not verdict(max_shift_px={"contact": 2.0}).matched
 
 
 def test_a_tolerance_naming_no_label_is_refused_in_one_line(moved_13):
     (g, gl), (c, cl) = moved_13
     with pytest.raises(ImageInputError, match="'gingva' names no label"):
         compare_labelled(g, c, GL, GL, Tolerance(), ("golden", "candidate"), gl, cl, ignore=["gingva"])
+    for bad in (-1.0, float("nan"), {"tooth": -2}, {"toth": 1}):
+        with pytest.raises(ImageInputError, match="max_shift_px|names no label"):
+            compare_labelled(g, c, GL, GL, Tolerance(), ("golden", "candidate"), gl, cl, max_shift_px=bad)
 
 
 # --------------------------------------------------------------------- files and the command line
