@@ -35,7 +35,9 @@ machine does not move the figure; the end-to-end records also give frames / tota
   - memory_mb: resident set size before and after a long (default 2,000 frames) update+render
     run: leaked GL programs or buffers would show there;
   - memory: peak MB of `orthosim run` for 10,000 steps without rendering and drawn into 2,000
-    frames, each in a fresh child process (`orthosim_bench.memory`, target under 500 MB each).
+    frames, each in a fresh child process (`orthosim_bench.memory`, target under 500 MB each);
+  - label_pass (`--labels`): the label pass of semantic goldens against a golden's own render time
+    (`orthosim_bench.labels`, target at most a fifth).
 Components that are missing are reported as null with a "pending" note, never estimated.
 """
 
@@ -276,7 +278,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
               png: bool = True, frames_per_step: int = 6, step_days: float | None = 2.0,
               tree_build: bool = True, startup: bool = True, staging: bool = True, batch: bool = False,
               report: bool = False, report_runs: str | Path | None = None, memory: bool = False,
-              run_case=None) -> dict:
+              run_case=None, labels: bool = False) -> dict:
     """Measure and return the bench record (see the module docstring and the output contract).
 
     `run_case(case_path, out_dir, detector, render_opts)` is the CLI's own run (the composition root
@@ -294,7 +296,9 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     sphere trees are also built from nothing (`orthosim_bench.spheretree`, target 10 s). With
     `batch`, animations per minute of `orthosim batch` with 1 and 2 workers (`orthosim_bench.batch`).
     With `report`, `orthosim report` of the paper's three cases x three detectors is timed from runs in
-    `report_runs` (made there first when missing; `orthosim_bench.report`, target 30 s).
+    `report_runs` (made there first when missing; `orthosim_bench.report`, target 30 s). With
+    `labels`, the label pass of semantic goldens against a golden's render (`orthosim_bench.labels`,
+    target at most a fifth).
     """
     import tempfile
 
@@ -556,4 +560,9 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         record["report"] = report_timings(report_runs)
         record["report_s"] = record["report"]["report_s"]
         record["meets_target"]["report"] = record["report"]["meets_target"]
+    if labels:  # semantic goldens: the label pass against a golden's render, 320x240
+        from orthosim_bench.labels import label_pass_timings
+
+        record["label_pass"] = label_pass_timings()
+        record["meets_target"]["label_pass"] = record["label_pass"]["meets_target"]
     return record

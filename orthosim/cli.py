@@ -219,9 +219,10 @@ def check(cases: tuple[Path, ...]) -> None:
               help="Where the report's runs are made once and kept for later benches.")
 @click.option("--step-days", default=2.0, show_default=True, type=click.FloatRange(min=0.01),
               help="Simulation step for the bench, so the case's teeth keep moving through the measured frames.")
+@click.option("--labels", is_flag=True, help="Also time the label pass of semantic goldens against a golden's render.")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
           no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool,
-          no_staging: bool, no_batch: bool, no_report: bool, report_runs: Path, no_memory: bool) -> None:
+          no_staging: bool, no_batch: bool, no_report: bool, report_runs: Path, no_memory: bool, labels: bool) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -234,7 +235,7 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
                        step_days=step_days, tree_build=not no_tree_build, startup=not no_startup,
                        staging=not no_staging, batch=not no_batch, report=not no_report, report_runs=report_runs,
-                       memory=not no_memory, run_case=run_case)
+                       memory=not no_memory, run_case=run_case, labels=labels)
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
@@ -248,6 +249,10 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
         click.echo(f"sphere trees of {trees['teeth']} teeth built in {trees['build_s']:.1f} s on {trees['workers']} cores "
                    f"(target {trees['target_s']:.0f} s; one process {trees['build_s_one_process']:.1f} s), "
                    f"loaded in {1000 * trees['load_s']:.0f} ms")
+    if record.get("label_pass"):
+        lp = record["label_pass"]
+        click.echo(f"label pass: at most {100 * lp['worst_ratio']:.0f} % of a golden's render time "
+                   f"(target {100 * lp['target_ratio']:.0f} %; draw alone {100 * lp['worst_ratio_draw_alone']:.0f} %)")
     staged = record.get("staging")
     if staged:
         big = staged["setup_28_teeth"]
@@ -313,19 +318,27 @@ def stage(case: Path, out_dir: Path, limits: str | None, no_render: bool, size, 
 @click.option("--max-fraction", default=0.001, show_default=True, type=float,
               help="Tolerance mode: fraction of pixels allowed to differ (0.001 = 0.1 %).")
 @click.option("--update", is_flag=True, help="Make the candidate the golden: rewrite GOLDEN.png and GOLDEN.json.")
+@click.option("--ignore", multiple=True, metavar="LABEL",
+              help="Leave out the pixels of a kind (gingiva, contact, marker, background), a tooth (13) or a contact "
+                   "(\"contact 13-14\"); repeatable; needs labels on both sides.")
+@click.option("--max-shift-px", default=0.0, show_default=True, type=float,
+              help="Tolerate a tooth or contact that only moved this many pixels (needs labels on both sides).")
 def imgdiff(golden: Path, candidate: Path, diff_path: Path | None, max_level: int, max_fraction: float,
-            update: bool) -> None:
+            update: bool, ignore: tuple[str, ...], max_shift_px: float) -> None:
     """Compare a render with its golden PNG; exit 0 match, 1 differ, 2 unusable input.
 
     Exact when the candidate was drawn by the GL renderer and Mesa version the golden's sidecar
-    (GOLDEN.json) names, else within tolerance (SSIM reported). See render/imgdiff.py.
+    (GOLDEN.json) names, else within tolerance (SSIM reported). When both carry labels
+    (GOLDEN.labels.npz/.json) a second line says what changed, tooth by tooth. See render/imgdiff.py.
     """
     from orthosim_render.imgdiff import Tolerance, imgdiff as compare
     from orthosim_render.regression import this_machine_gl
 
     outcome = compare(golden, candidate, diff_path=diff_path, tolerance=Tolerance(max_level, max_fraction),
-                      update=update, this_machine=this_machine_gl)
-    click.echo(outcome.line)
+                      update=update, this_machine=this_machine_gl, max_shift_px=max_shift_px,
+                      ignore=tuple(int(item) if item.isdigit() else item for item in ignore))
+    for line in outcome.lines:
+        click.echo(line)
     if outcome.exit_code:
         sys.exit(outcome.exit_code)
 
