@@ -99,6 +99,16 @@ class Simulation:
 
 
 @dataclass(frozen=True)
+class Occlusion:
+    """How the bite closes after each step ([occlusion] table; see orthosim.movement.closure)."""
+
+    closure: str | None = None  # "hinge" or "none"; None: hinge for mesh models with both arches, none for parametric
+    # right and left condyle centres (arch frame, mm) for a known patient; None: estimated from the arch
+    condylar_axis: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    max_opening_deg: float = 8.0  # the widest the mandible opens from rest (degrees)
+
+
+@dataclass(frozen=True)
 class Case:
     path: Path
     name: str
@@ -112,6 +122,7 @@ class Case:
     detector: str
     simulation: Simulation = Simulation()
     staging: CaseStaging | None = None  # the [start] and [target] sections (aligner staging), or None
+    occlusion: Occlusion = Occlusion()
 
     @property
     def steps(self) -> int:
@@ -170,7 +181,7 @@ class Case:
         return is_cached(*self._mesh_model_key())
 
 
-_TOP = ("case", "model", "treatment", "wire", "loads", "simulation", "start", "target")
+_TOP = ("case", "model", "treatment", "wire", "loads", "simulation", "start", "target", "occlusion")
 _CASE = ("name", "description")
 _MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files", "scale", "frame",
           "max_triangles_per_tooth")
@@ -178,6 +189,7 @@ MIN_TRIANGLES_PER_TOOTH = 10_000  # fewer would flatten a molar's cusps and foss
 FRAMES = ("arch", "scan")
 _TREATMENT = ("extractions", "duration_days", "step_days", "detector")
 _WIRE = ("type",)
+_OCCLUSION = ("closure", "condylar_axis", "max_opening_deg")
 _SIMULATION = ("force_share", "restitution", "resistance_rule", "resistance_fraction", "occlusal_slide_mm")
 RESISTANCE_RULES = ("literature", "paper")
 _LOAD = ("teeth", "force_cN", "direction", "point", "moment_cNmm", "moment_axis", "movement")
@@ -234,7 +246,28 @@ def load_case(path: str | Path) -> Case:
     simulation = _read_simulation(FieldReader(path, "simulation", top.get("simulation", {}), _SIMULATION))
 
     staging = read_case_staging(path, data, present, set(extractions))
-    return Case(path, name, description, model, tuple(extractions), loads, wire, duration, step, detector, simulation, staging)
+    occlusion = _read_occlusion(FieldReader(path, "occlusion", top.get("occlusion", {}), _OCCLUSION))
+    return Case(path, name, description, model, tuple(extractions), loads, wire, duration, step, detector, simulation, staging,
+                occlusion)
+
+
+def _read_occlusion(r: FieldReader) -> Occlusion:
+    closure = r.string("closure", None, ("hinge", "none")) if "closure" in r.table else None
+    axis = None
+    if "condylar_axis" in r.table:
+        raw = r.get("condylar_axis")
+        if not (isinstance(raw, list) and len(raw) == 2):
+            r.fail("condylar_axis", f"must be two points, got {raw!r}",
+                   "write [[x, y, z], [x, y, z]]: the right and the left condyle centre, arch frame, mm")
+        right, left = (r.vector(f"condylar_axis[{i}]", p) for i, p in enumerate(raw))
+        if math.dist(right, left) < 40.0:
+            r.fail("condylar_axis", f"the condyles are {math.dist(right, left):.1f} mm apart",
+                   "give the two condyle centres, about 100 mm apart (Bonwill), in mm")
+        axis = (right, left)
+    widest = r.number("max_opening_deg", 8.0, positive=True)
+    if widest > 30.0:
+        r.fail("max_opening_deg", f"{widest:g} degrees is beyond a mouth's hinge opening", "use at most 30")
+    return Occlusion(closure, axis, widest)
 
 
 def _read_simulation(r: FieldReader) -> Simulation:
