@@ -128,6 +128,17 @@ def estimate_hinge_axis(dentition, absent=frozenset()) -> HingeAxis:
     return HingeAxis(mid - half, mid + half, "Bonwill's triangle (100 mm) at Balkwill's angle (26 deg)")
 
 
+def _step_depth(mesh_a, pose_a, mesh_b, pose_b) -> float:
+    """mm two posed meshes interpenetrate by the measure a step uses (`collision.ExactQueries.penetration`:
+    vertices and edges for closed meshes), so that a pair at rest reads its rest depth exactly."""
+    from orthosim.geometry import meshquery
+    from orthosim.geometry.penetration import edge_penetration_depth, mesh_geometry
+
+    if mesh_geometry(mesh_a).closed and mesh_geometry(mesh_b).closed:
+        return edge_penetration_depth(mesh_a, pose_a, mesh_b, pose_b)
+    return meshquery.penetration_depth(mesh_a, pose_a, mesh_b, pose_b)
+
+
 @dataclass(frozen=True, eq=False)
 class RestOverlap:
     """A facing pair that interpenetrates at rest: its exact depth (mm) and each crown vertex's depth
@@ -175,11 +186,9 @@ class ClosureModel:
         crowns = {n: np.asarray(dentition.teeth[n].crown_vertices, float) for p in touched for n in p}
         surfaces = {n: SurfaceIndex.of(dentition.teeth[n].mesh) for n in crowns}
         model = cls(settings, axis, facing, {}, crowns, surfaces)
-        from orthosim.collision.interpenetration import pair_depth
-
         for u, lo in touched:
             tu, tl = dentition.teeth[u], dentition.teeth[lo]
-            model.overlaps[(u, lo)] = RestOverlap(pair_depth(tu.mesh, rest[u], tl.mesh, rest[lo]),
+            model.overlaps[(u, lo)] = RestOverlap(_step_depth(tu.mesh, rest[u], tl.mesh, rest[lo]),
                                                   model.vertex_depths(u, lo, rest), model.vertex_depths(lo, u, rest))
         lower = [n for n in dentition.fdis if F.arch_of(n) is F.Arch.LOWER and n not in absent]
         molars = [n for n in lower if F.position(n) == 6] or lower

@@ -29,6 +29,12 @@ memos) are apart; `step(model, state) -> (state, record)` makes one step (the pa
    motions (a few rounds). Discrete detectors (bounding circles, discrete sphere trees, exact
    meshes) test the end poses: a tooth found overlapping stops there, so it may have sunk into
    its neighbour by up to one step's travel, which is the paper's point about them.
+   With the bite's closure on (`closure`; `[occlusion] closure = "hinge"`, the default for mesh
+   models), facing teeth are not tested here at all: after detection the mandible, carrying the
+   lower teeth, opens about its condylar axis as far as the moved cusps require and closes again
+   to first contact (`closure.settle_bite`), so a tooth moving in contact with an antagonist
+   glides and is stopped only by its own arch's neighbours or by a contact the closure cannot
+   resolve (the tooth then keeps its start pose). The slide allowance above is then unused.
 4. `contacts_at`: the contacts at the new poses (`collision.contacts`) give the touching set of
    the next step and the exact interpenetration.
 5. `response`: each collision's rigid-body impact response (`impact`), one event per pair.
