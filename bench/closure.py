@@ -46,7 +46,7 @@ def _timed_steps(case, steps: int) -> dict:
     return {"step_s": step_s, "closure_s": closure_s, "rest_of_step_s": [a - b for a, b in zip(step_s, closure_s)]}
 
 
-def closure_timings(case_path: str | Path, steps: int = 3) -> dict:
+def closure_timings(case_path: str | Path, steps: int = 6) -> dict:
     """The closure's bench record for one (real-jaw) case: seconds per step with and without the
     closure, the closure's share, and the two ratios (medians over the steps)."""
     from orthosim.exchange.case import load_case

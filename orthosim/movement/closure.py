@@ -12,9 +12,12 @@ pair is clear, then closes it to first contact:
   along the chord of the hinge's arc; over 0.5 degrees a point 110 mm from the axis leaves the arc
   by at most 110 * (0.5 pi / 180)^2 / 8 = 0.001 mm, far below the contact tolerance;
 - facing pairs that interpenetrate at rest (the scan's segmentation overlap, the rest state) may
-  come back to that overlap but no deeper: their limit is the pair's exact depth (`ExactQueries`)
-  and every crown vertex's depth inside the other tooth (`analysis.distancemap.SurfaceIndex`), each
-  at most its rest value plus the tolerance; the angle where that limit is met is bisected.
+  come back to that overlap but no deeper: every crown vertex's depth inside the other tooth
+  (`analysis.distancemap.SurfaceIndex`, the report's measure) at most its rest value plus the
+  tolerance; the angle where that limit is met is bisected. The step's pair depth
+  (`ExactQueries.penetration`) also sees edges, whose interior can lie deeper than both ends by
+  the sagitta of an edge over a cusp: 0.3 mm edges over a 2 mm cusp radius, 0.3^2 / 16 = 0.006 mm.
+  Checking it as well would cost ten times as much (0.14 s a pair on patient 26).
 
 A contact the closure cannot resolve is one still beyond its limit with the mandible opened by
 `max_opening_deg` (an upper tooth driven into the side of a lower one, which opening the jaw does
@@ -35,6 +38,7 @@ plane. Units: mm, degrees (positive opening: the incisors go down).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Mapping
 
 import numpy as np
@@ -65,7 +69,7 @@ class ClosureSettings:
     mode: str = "none"
     condylar_axis_mm: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     tolerance_mm: float = 0.02
-    open_deg: float = 1.0
+    open_deg: float = 0.25
     max_opening_deg: float = 8.0
     sweep_deg: float = 0.5
 
@@ -128,29 +132,17 @@ def estimate_hinge_axis(dentition, absent=frozenset()) -> HingeAxis:
     return HingeAxis(mid - half, mid + half, "Bonwill's triangle (100 mm) at Balkwill's angle (26 deg)")
 
 
-def _step_depth(mesh_a, pose_a, mesh_b, pose_b) -> float:
-    """mm two posed meshes interpenetrate by the measure a step uses (`collision.ExactQueries.penetration`:
-    vertices and edges for closed meshes), so that a pair at rest reads its rest depth exactly."""
-    from orthosim.geometry import meshquery
-    from orthosim.geometry.penetration import edge_penetration_depth, mesh_geometry
-
-    if mesh_geometry(mesh_a).closed and mesh_geometry(mesh_b).closed:
-        return edge_penetration_depth(mesh_a, pose_a, mesh_b, pose_b)
-    return meshquery.penetration_depth(mesh_a, pose_a, mesh_b, pose_b)
-
-
 @dataclass(frozen=True, eq=False)
 class RestOverlap:
-    """A facing pair that interpenetrates at rest: its exact depth (mm) and each crown vertex's depth
-    inside the other tooth at rest ((k,) mm, 0 outside), for the upper and the lower tooth."""
+    """A facing pair that interpenetrates at rest: each crown vertex's depth inside the other tooth at
+    rest ((k,) mm, 0 outside), for the upper and the lower tooth."""
 
-    depth_mm: float
     upper_vertex_depths_mm: np.ndarray
     lower_vertex_depths_mm: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
-class ClosureModel:
+class ClosureModel:  # eq=False and no slots: `_boxes` is cached in the instance's __dict__
     """What the closure needs and never changes during a run: the settings, the hinge axis, the facing
     pairs (upper, lower), the pairs overlapping at rest, the crown vertices and surface indexes of
     their teeth, and the mandible's landmarks (incisal point, mean lower first-molar crown centre,
@@ -188,14 +180,22 @@ class ClosureModel:
         model = cls(settings, axis, facing, {}, crowns, surfaces)
         for u, lo in touched:
             tu, tl = dentition.teeth[u], dentition.teeth[lo]
-            model.overlaps[(u, lo)] = RestOverlap(_step_depth(tu.mesh, rest[u], tl.mesh, rest[lo]),
-                                                  model.vertex_depths(u, lo, rest), model.vertex_depths(lo, u, rest))
+            model.overlaps[(u, lo)] = RestOverlap(model.vertex_depths(u, lo, rest), model.vertex_depths(lo, u, rest))
         lower = [n for n in dentition.fdis if F.arch_of(n) is F.Arch.LOWER and n not in absent]
         molars = [n for n in lower if F.position(n) == 6] or lower
         centers = dentition.crown_centers(rest)
         object.__setattr__(model, "incisal_mm", _incisal_point(dentition, lower))
         object.__setattr__(model, "molar_mm", np.mean([centers[n] for n in molars], axis=0))
         return model
+
+    @cached_property
+    def _boxes(self) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """FDI -> ((3,), (3,)) mm: the local bounding box of each indexed tooth's surface."""
+        out = {}
+        for n, sf in self.surfaces.items():
+            corners = np.concatenate([sf.a, sf.b, sf.c])
+            out[n] = corners.min(axis=0), corners.max(axis=0)
+        return out
 
     def vertex_depths(self, a: int, b: int, poses: Mapping[int, np.ndarray]) -> np.ndarray:
         """(k,) mm each crown vertex of tooth a lies inside tooth b at `poses` (0 outside)."""
@@ -205,9 +205,7 @@ class ClosureModel:
         local = V @ M[:3, :3].T + M[:3, 3]
         surface = self.surfaces[b]
         out = np.zeros(len(V))
-        lo, hi = surface.a.min(axis=0), surface.a.max(axis=0)
-        lo = np.minimum(lo, np.minimum(surface.b.min(axis=0), surface.c.min(axis=0)))
-        hi = np.maximum(hi, np.maximum(surface.b.max(axis=0), surface.c.max(axis=0)))
+        lo, hi = self._boxes[b]
         near = np.flatnonzero(np.all((local >= lo) & (local <= hi), axis=1))  # only these can be inside
         if len(near):
             d, _ = surface.signed_distance(local[near], 5.0)
@@ -254,24 +252,30 @@ class _Sweep:
         return out
 
     def excess_mm(self, pair, poses) -> float:
-        """mm the pair lies beyond its limit at `poses`: deeper than its rest overlap (pair depth or
-        any crown vertex), or for a pair apart at rest, intersecting at all (then its depth, at least
-        the tolerance's double so that it always counts)."""
-        rest = self.cm.overlaps.get(pair)
+        """mm the pair lies beyond its limit at `poses`: for a pair apart at rest, infinite when its
+        meshes intersect at all; for a pair the scan left overlapping, how much deeper than at rest
+        any crown vertex of either tooth lies inside the other (module doc)."""
         q = self.queries
-        if rest is None:
-            return max(q.penetration(pair, poses), 2.0 * self.cm.settings.tolerance_mm) if q.intersects(pair, poses) else 0.0
         if not q.intersects(pair, poses):
             return 0.0
+        rest = self.cm.overlaps.get(pair)
+        if rest is None:
+            return np.inf
         u, lo = pair
-        return max(q.penetration(pair, poses) - rest.depth_mm,
-                   float(np.max(self.cm.vertex_depths(u, lo, poses) - rest.upper_vertex_depths_mm, initial=0.0)),
+        return max(float(np.max(self.cm.vertex_depths(u, lo, poses) - rest.upper_vertex_depths_mm, initial=0.0)),
                    float(np.max(self.cm.vertex_depths(lo, u, poses) - rest.lower_vertex_depths_mm, initial=0.0)))
 
-    def beyond(self, delta_deg: float, pairs) -> list[tuple[int, int]]:
+    def beyond(self, delta_deg: float, pairs, first: bool = False) -> list[tuple[int, int]]:
+        """The pairs beyond their limit with the mandible turned by `delta_deg` (with `first`, at most one)."""
         P = self.posed(delta_deg)
         tol = self.cm.settings.tolerance_mm
-        return [p for p in pairs if self.excess_mm(p, P) > tol]
+        out = []
+        for p in pairs:
+            if self.excess_mm(p, P) > tol:
+                out.append(p)
+                if first:
+                    break
+        return out
 
     def open(self) -> tuple[float, tuple[tuple[int, int], ...]]:
         """(delta degrees, unresolved pairs): the least trial opening (doubling from `open_deg`, up to
@@ -312,7 +316,7 @@ class _Sweep:
                         at = a - t * (a - b)
                         stop = at if stop is None else max(stop, at)
             end = b if stop is None else stop
-            if engaged and self.beyond(end, engaged):
+            if engaged and self.beyond(end, engaged, first=True):
                 return self._bisect(a, end, engaged)
             if stop is not None:
                 return stop
@@ -326,7 +330,7 @@ class _Sweep:
         step = np.degrees(self.cm.settings.tolerance_mm / span)
         while ok_deg - bad_deg > step:
             mid = 0.5 * (ok_deg + bad_deg)
-            if self.beyond(mid, pairs):
+            if self.beyond(mid, pairs, first=True):
                 bad_deg = mid
             else:
                 ok_deg = mid
