@@ -13,7 +13,11 @@ resistance, the loads' moment-to-force ratio (mm) and the movement it makes}, `t
 interpenetration the movement added to any pair; `initial_penetration_mm` is the model's own, and
 `initial_interpenetration` lists the pairs that start interpenetrating beyond the touch tolerance,
 deepest first, as {`pair`, `mm`}), `collisions` (count), `distances` (per adjacent pair: `pair`,
-`initial_mm`, `final_mm`), and `per_step_file`: the name of the per-step detail beside it.
+`initial_mm`, `final_mm`), and `per_step_file`: the name of the per-step detail beside it. A run that
+closes the bite after every step (`orthosim.movement.closure`) adds `bite` (the change in vertical
+dimension over the treatment, the opening at the molars, the condylar axis) and each lower tooth's
+`moved_in_mandible_mm`, and each line of steps.jsonl its step's `bite` (hinge angle, opening at the
+incisors and the molars in mm, the facing pairs in contact at closure and their count).
 steps.jsonl: one JSON object per line, one line per step (step 0, the initial state, first): its
 time (days), the pose of every tooth, the touching pairs, the tooth-to-tooth distances and their
 total, the largest interpenetration, the collisions (with the impact response) and the propagated
