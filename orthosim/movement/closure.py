@@ -293,28 +293,14 @@ class _Sweep:
 
     def close(self, top_deg: float, floor_deg: float) -> float:
         """delta degrees where closing from `top_deg` toward `floor_deg` first meets a limit."""
-        from orthosim.collision import CollisionRequest, detect_step
-
         s = self.cm.settings
-        request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=True,
-                                   contact_tolerance_mm=s.tolerance_mm, drawn_leaves=False)
         a = top_deg
         engaged = {p for p in self.cm.overlaps if self.queries.intersects(p, self.posed(a))}
         while a > floor_deg:
             b = max(a - s.sweep_deg, floor_deg)
             free = [p for p in self.cm.facing if p not in engaged]
-            stop = None
-            if free:
-                res = detect_step(self.collision, self.posed(a), self.posed(b), free, "continuous", request,
-                                  queries=self.queries)
-                for pr, t in zip(res.pairs.tolist(), res.time_of_first_contact.tolist()):
-                    if np.isnan(t):
-                        continue
-                    if tuple(pr) in self.cm.overlaps:
-                        engaged.add(tuple(pr))
-                    else:
-                        at = a - t * (a - b)
-                        stop = at if stop is None else max(stop, at)
+            t = self._first_contact(free, a, b, engaged) if free else None
+            stop = None if t is None else a - t * (a - b)
             end = b if stop is None else stop
             if engaged and self.beyond(end, engaged, first=True):
                 return self._bisect(a, end, engaged)
@@ -322,6 +308,34 @@ class _Sweep:
                 return stop
             a = b
         return floor_deg
+
+    def _first_contact(self, pairs, a_deg: float, b_deg: float, engaged: set) -> float | None:
+        """The continuous detector's first time of contact (fraction of the turn from `a_deg` to
+        `b_deg`) of the pairs apart at rest, None if none meets; pairs overlapping at rest that come
+        into contact join `engaged`. The sphere trees' times are conservative, so pairs are refined
+        on the exact meshes earliest first, and one whose sphere-tree time is not before the best
+        refined time cannot be first (its refinement is skipped)."""
+        from orthosim.collision import CollisionRequest, detect_step
+        from orthosim.collision.continuous import refine_time_of_contact
+
+        P0, P1 = self.posed(a_deg), self.posed(b_deg)
+        request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=False, drawn_leaves=False)
+        res = detect_step(self.collision, P0, P1, pairs, "continuous", request, queries=self.queries)
+        hits = sorted((t, tuple(pr)) for pr, t in zip(res.pairs.tolist(), res.time_of_first_contact.tolist())
+                      if not np.isnan(t))
+        best = None
+        for t, (u, lo) in hits:
+            if (u, lo) in self.cm.overlaps:
+                engaged.add((u, lo))
+                continue
+            if best is not None and t >= best:
+                continue
+            iu, il = self.collision.index[u], self.collision.index[lo]
+            r = refine_time_of_contact(self.collision, iu, il, P0[u], P1[u], P0[lo], P1[lo], t,
+                                       self.cm.settings.tolerance_mm, queries=self.queries)
+            if r is not None:
+                best = r if best is None else min(best, r)
+        return best
 
     def _bisect(self, ok_deg: float, bad_deg: float, pairs) -> float:
         """The angle within the tolerance's travel above the first where a pair passes its limit."""
