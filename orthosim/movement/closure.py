@@ -1,4 +1,4 @@
-"""The bite closes after every step: the mandible, one rigid body, turns about its hinge axis until its teeth meet the upper teeth.
+"""The bite closes after every step: the mandible turns about its hinge axis until its teeth meet the upper ones.
 
 Teeth of the two arches do not pass through each other, and they do not lock either: the jaw
 opens as far as the cusps require and closes again (maximum intercuspation, what a dental CAD's
@@ -27,9 +27,9 @@ The condylar axis, unless the case gives it (`[occlusion] condylar_axis`), is es
 lower arch with Bonwill's triangle: the two condyles and the lower central incisors' contact
 point form an equilateral triangle of 4 inches (about 100 mm) a side (Bonwill 1899, "The
 scientific articulation of the human teeth as founded on geometrical, mathematical and mechanical
-laws", Dental Items of Interest 21: 617-636), tilted by Balkwill's angle (about 26 degrees, the
+laws", Dental Items of Interest, 1899), tilted by Balkwill's angle (about 26 degrees, the
 mean he measured, Balkwill 1866, "The best form and arrangement of artificial teeth for
-mastication", Trans. Odontol. Soc. Great Britain 5: 133-158) to the occlusal plane. So the
+mastication", Transactions of the Odontological Society of Great Britain, 1866) to the occlusal plane. So the
 intercondylar distance is 100 mm, and the midpoint of the condyles lies 100 cos 30 = 86.6 mm from
 the incisal point, 86.6 cos 26 = 77.8 mm behind it and 86.6 sin 26 = 38.0 mm above the occlusal
 plane. Units: mm, degrees (positive opening: the incisors go down).
@@ -47,7 +47,6 @@ from orthosim.model import fdi as F
 
 BONWILL_SIDE_MM = 100.0  # Bonwill 1899: the equilateral triangle's side (4 inches)
 BALKWILL_DEG = 26.0  # Balkwill 1866: mean angle between Bonwill's triangle and the occlusal plane
-CLOSURES = ("hinge", "none")
 
 
 @dataclass(frozen=True)
