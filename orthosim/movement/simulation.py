@@ -420,7 +420,6 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
     touching_set = set(state.touching)
     hits: list[Hit] = []
     tested_pairs: set = set()
-    closing = model.closure is not None  # the two arches' contacts are the closure's, after the step
 
     def approaching(pair, current) -> bool:
         if state.detector != "continuous":
@@ -432,7 +431,7 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
         out = []
         for pair in model.pairs:
             a, b = pair
-            if pair in skip or (a not in current and b not in current) or (closing and pair in model.facing):
+            if pair in skip or (a not in current and b not in current) or (model.closure is not None and pair in model.facing):
                 continue
             if pair in touching_set and not approaching(pair, current):
                 continue
@@ -475,7 +474,7 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
         # The sliding allowance was checked at the intended end of each move; a move cut short
         # by another contact may stop mid-way over a cusp, deeper than its end would be: such a
         # tooth keeps its start pose, so the bound holds on the poses a step leaves.
-        for pair in touching_set if not closing else ():
+        for pair in touching_set if model.closure is None else ():  # with a closure, the arches' contacts are its
             if pair in model.facing and any(P1[n] is not P[n] for n in pair) and \
                     queries.penetration(pair, P1) - state.rest_depths.get(pair, 0.0) > state.slide_allowance(model, pair):
                 for n in pair:
