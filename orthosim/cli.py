@@ -220,9 +220,12 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--step-days", default=2.0, show_default=True, type=click.FloatRange(min=0.01),
               help="Simulation step for the bench, so the case's teeth keep moving through the measured frames.")
 @click.option("--labels", is_flag=True, help="Also time the label pass of semantic goldens against a golden's render.")
+@click.option("--closure", "closure_case", type=click.Path(path_type=Path), default=None,
+              help="Also time this (real-jaw) case's step with and without the bite's closure.")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
           no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool,
-          no_staging: bool, no_batch: bool, no_report: bool, report_runs: Path, no_memory: bool, labels: bool) -> None:
+          no_staging: bool, no_batch: bool, no_report: bool, report_runs: Path, no_memory: bool, labels: bool,
+          closure_case: Path | None) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -236,6 +239,11 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
                        step_days=step_days, tree_build=not no_tree_build, startup=not no_startup,
                        staging=not no_staging, batch=not no_batch, report=not no_report, report_runs=report_runs,
                        memory=not no_memory, run_case=run_case, labels=labels)
+    if closure_case is not None:
+        from orthosim_bench.closure import closure_timings
+
+        record["closure"] = closure_timings(closure_case)
+        click.echo(f"closure: {record['closure']['closure_over_rest_of_step']:.2f} of the rest of the step (target <= 1)")
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())

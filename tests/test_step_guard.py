@@ -67,10 +67,15 @@ def canonical(x) -> str:
     raise TypeError(f"no canonical form for {type(x).__name__}")
 
 
+# fields added to StepRecord after digests were stored, left out where a run leaves them None (a
+# run without the bite's closure has no `bite`), so that records which did not change keep their digests
+LATER_FIELDS = ("bite",)
+
+
 def digests(record) -> dict[str, str]:
     """field name -> sha256 (first 16 hex digits) of its canonical form, for one StepRecord."""
     return {f.name: hashlib.sha256(canonical(getattr(record, f.name)).encode()).hexdigest()[:16]
-            for f in dataclasses.fields(record)}
+            for f in dataclasses.fields(record) if not (f.name in LATER_FIELDS and getattr(record, f.name) is None)}
 
 
 _models: dict[str, MovementModel] = {}

@@ -120,6 +120,16 @@ class Biomechanics:
 
 
 @dataclass(frozen=True)
+class Occlusion:
+    """How the bite closes after each step ([occlusion] table; see orthosim.movement.closure)."""
+
+    closure: str | None = None  # "hinge" or "none"; None: hinge for mesh models with both arches, none for parametric
+    # right and left condyle centres (arch frame, mm) for a known patient; None: estimated from the arch
+    condylar_axis: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    max_opening_deg: float = 8.0  # the widest the mandible opens from rest (degrees)
+
+
+@dataclass(frozen=True)
 class Case:
     path: Path
     name: str
@@ -134,6 +144,7 @@ class Case:
     simulation: Simulation = Simulation()
     staging: CaseStaging | None = None  # the [start] and [target] sections (aligner staging), or None
     biomechanics: Biomechanics = Biomechanics()  # the [biomechanics] table: the rate law's constants
+    occlusion: Occlusion = Occlusion()
 
     @property
     def steps(self) -> int:
@@ -192,7 +203,7 @@ class Case:
         return is_cached(*self._mesh_model_key())
 
 
-_TOP = ("case", "model", "treatment", "wire", "loads", "simulation", "start", "target", "biomechanics")
+_TOP = ("case", "model", "treatment", "wire", "loads", "simulation", "start", "target", "biomechanics", "occlusion")
 _CASE = ("name", "description")
 _MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files", "scale", "frame",
           "max_triangles_per_tooth")
@@ -219,6 +230,7 @@ def _bounded(r: FieldReader, key: str, default: float, positive: bool = False) -
 FRAMES = ("arch", "scan")
 _TREATMENT = ("extractions", "duration_days", "step_days", "detector")
 _WIRE = ("type",)
+_OCCLUSION = ("closure", "condylar_axis", "max_opening_deg")
 _SIMULATION = ("force_share", "restitution", "resistance_rule", "resistance_fraction", "occlusal_slide_mm")
 RESISTANCE_RULES = ("literature", "paper")
 _BIOMECHANICS = ("parameters", "threshold_cN", "saturation_cN", "max_rate_mm_per_month", "reference_root_area_mm2",
@@ -283,8 +295,9 @@ def load_case(path: str | Path) -> Case:
 
     staging = read_case_staging(path, data, present, set(extractions))
     biomechanics = _read_biomechanics(FieldReader(path, "biomechanics", top.get("biomechanics", {}), _BIOMECHANICS))
+    occlusion = _read_occlusion(FieldReader(path, "occlusion", top.get("occlusion", {}), _OCCLUSION))
     return Case(path, name, description, model, tuple(extractions), loads, wire, duration, step, detector, simulation, staging,
-                biomechanics)
+                biomechanics, occlusion)
 
 
 def _read_biomechanics(r: FieldReader) -> Biomechanics:
@@ -308,6 +321,25 @@ def _read_biomechanics(r: FieldReader) -> Biomechanics:
         r.fail(key, f"the saturation force ({saturation:g} cN) must exceed the threshold ({threshold:g} cN)",
                f"raise saturation_cN above threshold_cN (the {parameters!r} set has {base.threshold_cN:g} and {base.saturation_cN:g})")
     return Biomechanics(parameters, **values)
+
+
+def _read_occlusion(r: FieldReader) -> Occlusion:
+    closure = r.string("closure", None, ("hinge", "none")) if "closure" in r.table else None
+    axis = None
+    if "condylar_axis" in r.table:
+        raw = r.get("condylar_axis")
+        if not (isinstance(raw, list) and len(raw) == 2):
+            r.fail("condylar_axis", f"must be two points, got {raw!r}",
+                   "write [[x, y, z], [x, y, z]]: the right and the left condyle centre, arch frame, mm")
+        right, left = (r.vector(f"condylar_axis[{i}]", p) for i, p in enumerate(raw))
+        if math.dist(right, left) < 40.0:
+            r.fail("condylar_axis", f"the condyles are {math.dist(right, left):.1f} mm apart",
+                   "give the two condyle centres, about 100 mm apart (Bonwill), in mm")
+        axis = (right, left)
+    widest = r.number("max_opening_deg", 8.0, positive=True)
+    if widest > 30.0:
+        r.fail("max_opening_deg", f"{widest:g} degrees is beyond a mouth's hinge opening", "use at most 30")
+    return Occlusion(closure, axis, widest)
 
 
 def _read_simulation(r: FieldReader) -> Simulation:

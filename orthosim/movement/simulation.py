@@ -29,6 +29,12 @@ memos) are apart; `step(model, state) -> (state, record)` makes one step (the pa
    motions (a few rounds). Discrete detectors (bounding circles, discrete sphere trees, exact
    meshes) test the end poses: a tooth found overlapping stops there, so it may have sunk into
    its neighbour by up to one step's travel, which is the paper's point about them.
+   With the bite's closure on (`closure`; `[occlusion] closure = "hinge"`, the default for mesh
+   models), facing teeth are not tested here at all: after detection the mandible, carrying the
+   lower teeth, opens about its condylar axis as far as the moved cusps require and closes again
+   to first contact (`closure.settle_bite`), so a tooth moving in contact with an antagonist
+   glides and is stopped only by its own arch's neighbours or by a contact the closure cannot
+   resolve (the tooth then keeps its start pose). The slide allowance above is then unused.
 4. `contacts_at`: the contacts at the new poses (`collision.contacts`) give the touching set of
    the next step and the exact interpenetration.
 5. `response`: each collision's rigid-body impact response (`impact`), one event per pair.
@@ -39,6 +45,7 @@ Units: mm, degrees in reports, cN, cN*mm, days.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field, replace
 from typing import Callable, Iterator, Mapping
 
@@ -57,7 +64,7 @@ from orthosim.movement.biomechanics import (DAYS_PER_MONTH, PARAMETER_SETS, Moti
                                            tooth_motion)
 from orthosim.movement.impact import Body, impact
 from orthosim.movement.propagation import ForceBalance, propagate
-from orthosim.movement.records import CollisionEvent, StepRecord
+from orthosim.movement.records import BiteRecord, CollisionEvent, StepRecord
 from orthosim.movement.vec import length
 
 @dataclass(frozen=True)
@@ -130,6 +137,7 @@ class MovementModel:
     facing: frozenset[tuple[int, int]] = field(default_factory=frozenset)
     total_mass_g: float = 0.0
     arch_orders: dict[F.Arch, list[int]] = field(default_factory=dict)  # present teeth, right to left
+    closure: "ClosureModel | None" = None  # the bite's closure after each step (`closure`); None: the slide allowance
     # FDI -> its place along its arch among the dentition's teeth (extracted ones included), right to left
     arch_place: dict[int, int] = field(init=False, repr=False)
 
@@ -155,7 +163,17 @@ class MovementModel:
                 for n in present}
         orders = {arch: [t for t in F.arch_order(arch, set(dentition.teeth)) if t not in extracted] for arch in F.Arch}
         return cls(case, dentition, collision, mech, settings, extracted, present, tuple(map(tuple, pairs)), facing,
-                   arch_orders=orders)
+                   arch_orders=orders, closure=_closure_model(case, dentition, settings, facing, extracted, orders))
+
+
+def _closure_model(case: Case, dentition: Dentition, settings: MovementSettings, facing, extracted, orders):
+    """The bite's closure model when the case closes the bite and both arches have teeth, else None."""
+    from orthosim.movement.closure import ClosureModel, closure_settings
+
+    chosen = closure_settings(case, settings.contact_tolerance_mm)
+    if chosen.mode == "none" or not facing or min(len(orders[F.Arch.UPPER]), len(orders[F.Arch.LOWER])) < 3:
+        return None
+    return ClosureModel.build(chosen, dentition, sorted(facing), extracted)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -265,6 +283,7 @@ class StepState:
     bite: pairs of facing teeth in contact in the initial state (the bite as the model stands): they
         may slide by `occlusal_slide_mm`; contacts the run makes get the touch tolerance.
     centers: FDI -> (3,) crown centres at `poses` (`Dentition.crown_centers`; found when None).
+    mandible_deg: with a closure, the hinge angle the lower teeth's poses stand at.
     """
 
     step: int
@@ -276,6 +295,7 @@ class StepState:
     queries: ExactQueries
     bite: frozenset[tuple[int, int]] = frozenset()
     centers: Mapping[int, np.ndarray] | None = None
+    mandible_deg: float = 0.0  # the mandible's hinge angle from rest (degrees, positive open; `closure`)
 
     def slide_allowance(self, model: "MovementModel", pair: tuple[int, int]) -> float:
         """mm a facing pair may sink below the rest state while its cusps slide along each other."""
@@ -427,7 +447,7 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
         out = []
         for pair in model.pairs:
             a, b = pair
-            if pair in skip or (a not in current and b not in current):
+            if pair in skip or (a not in current and b not in current) or (model.closure is not None and pair in model.facing):
                 continue
             if pair in touching_set and not approaching(pair, current):
                 continue
@@ -470,7 +490,7 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
         # The sliding allowance was checked at the intended end of each move; a move cut short
         # by another contact may stop mid-way over a cusp, deeper than its end would be: such a
         # tooth keeps its start pose, so the bound holds on the poses a step leaves.
-        for pair in touching_set:
+        for pair in touching_set if model.closure is None else ():  # with a closure, the arches' contacts are its
             if pair in model.facing and any(P1[n] is not P[n] for n in pair) and \
                     queries.penetration(pair, P1) - state.rest_depths.get(pair, 0.0) > state.slide_allowance(model, pair):
                 for n in pair:
@@ -534,14 +554,29 @@ def step(model: MovementModel, state: StepState) -> tuple[StepState, StepRecord]
     f = forces(model, state, centers)
     moves = motions(model, state, f, centers)
     detected = detection(model, state, moves, centers)
-    P = detected.poses
-    moved = frozenset(n for n in moves if not _close(P[n], state.poses[n]))
+    P, angle, closed = detected.poses, state.mandible_deg, None
+    if model.closure is not None:
+        from orthosim.movement.closure import settle_bite
+
+        closed, P = settle_bite(model.closure, model.collision, state.queries, state.poses, P, angle)
+    moved = frozenset(n for n in moves if not _close(P[n], state.poses[n]))  # in the mandible, before it turns
+    if closed is not None:
+        P, angle = closed.poses, closed.angle_deg
     found = contacts_at(model, state, P)
     events = response(model, state, moves, detected, found, centers)
     k = state.step + 1
     new = StepState(k, k * float(model.case.step_days), P, found.touching, state.rest_depths, state.detector, state.queries,
-                    state.bite, model.dentition.crown_centers(P))
-    return new, _record(model, new, moved, found, events, f.balance)
+                    state.bite, model.dentition.crown_centers(P), angle)
+    record = _record(model, new, moved, found, events, f.balance)
+    if closed is None:
+        return new, record
+    return new, dataclasses.replace(record, bite=_bite_record(model, closed, found))
+
+
+def _bite_record(model: MovementModel, closed, found: Contacts) -> BiteRecord:
+    incisors, molars = model.closure.opening_mm(closed.angle_deg)
+    contacts = tuple(p for p in found.touching if p in model.facing)
+    return BiteRecord(float(closed.angle_deg), incisors, molars, contacts, closed.unresolved)
 
 
 def _record(model: MovementModel, state: StepState, moved: frozenset[int], found: Contacts,

@@ -57,6 +57,7 @@ def case_record(data: CaseData, images: dict) -> dict:
             "teeth": {n: {k: t[k] for k in ("moved_mm", "rotated_deg", "extracted")} for n, t in m["teeth"].items()},
             "totals_over_days": [{"day": s["time_days"], "total_mm": s["total_distance_mm"]} for s in r.steps],
             "final_day": r.steps[-1]["time_days"],
+            "bite": m.get("bite"),
         }
     throughput = {}
     for det, r in data.runs.items():
