@@ -252,6 +252,9 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
         big = staged["setup_28_teeth"]
         click.echo(f"staging: {big['teeth']} teeth, {big['stages']} stages planned in {big['staging_s']:.1f} s "
                    f"(target {big['target_s']:.0f} s); " + ", ".join(f"{k} {v['staging_s']:.1f} s" for k, v in staged["cases"].items()))
+        v = staged["verify_28_teeth"]
+        click.echo(f"stage verify: {v['stages']} stages of {v['teeth']} teeth checked in {v['verify_s']:.1f} s "
+                   f"(target {v['target_s']:.0f} s; x{v['verify_to_planning']:.2f} its planning time)")
     if record.get("report"):
         r = record["report"]
         click.echo(f"report of {r['cases']} cases x 3 detectors from existing runs: {r['report_s']:.1f} s "
@@ -353,7 +356,8 @@ def _stage_into(case: Path, out: Path, limits, views, size, frames_per_stage: in
 @click.option("--case", "case", type=click.Path(path_type=Path), default=None,
               help="The case it was staged from (default: the one stages.json names).")
 @click.option("--limits", default=None, help="Check against these limits instead of the ones the staging was planned with.")
-def stage_verify(folder: Path, case: Path | None, limits: str | None) -> None:
+@click.option("--all", "show_all", is_flag=True, help="Print every violation, one line each, not only the first.")
+def stage_verify(folder: Path, case: Path | None, limits: str | None, show_all: bool) -> None:
     """Re-check a written staging from its files alone: limits per component, and no contact along
     any stage's motion (dense exact sampling). Exit 0 when every stage holds, 1 naming the first violation."""
     from orthosim.staging.limits import StageLimits
@@ -363,6 +367,8 @@ def stage_verify(folder: Path, case: Path | None, limits: str | None) -> None:
     written, dent, start, target = load_for_verify(folder, case)
     verdict = verify_staging(written, dent, start, target, parsed, folder=folder)
     click.echo(verdict.line())
+    for v in verdict.violations[1:] if show_all else ():
+        click.echo(f"{folder}: stage {v.stage}: {v.kind}: {v.text}")
     if not verdict.holds:
         sys.exit(1)
 
