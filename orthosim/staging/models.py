@@ -12,6 +12,11 @@ watertight; neighbours are separate bodies even where they touch). glb: one node
 `tooth_<FDI>`, its mesh in the tooth's local frame and its pose as the node's transform (mm as
 written; glTF viewers assume metres).
 
+Before writing, vertices of a tooth within `WELD_MM` of each other are welded and the faces that
+collapse are dropped (the parametric molars have a zero-height sliver at a root seam, two vertices
+2e-11 mm apart: STL's float32 coordinates would weld them on reading and leave the molar open).
+The tooth stays closed and its volume unchanged.
+
 What is not there: gingiva (no case of orthosim has a gingiva model yet) and the reduction itself:
 where interproximal reduction is planned, the exported teeth are the full teeth, so from stage 1 on
 the two reduced teeth overlap by up to the planned amount at that contact (see `staging.ipr`).
@@ -28,6 +33,18 @@ from orthosim.model import fdi as F
 from orthosim.storage.atomic import write_bytes
 
 FORMATS = ("stl", "ply", "glb")
+WELD_MM = 1e-6  # vertices closer than this are one vertex in a printed model
+
+
+def printable(mesh):
+    """A copy of `mesh` with vertices within about WELD_MM welded and collapsed faces dropped."""
+    import trimesh
+
+    out = trimesh.Trimesh(np.asarray(mesh.vertices, float).copy(), np.asarray(mesh.faces).copy(), process=False)
+    out.merge_vertices(digits_vertex=int(round(-np.log10(WELD_MM))))
+    out.update_faces(out.nondegenerate_faces(height=1e-9))
+    out.remove_unreferenced_vertices()
+    return out
 
 
 def stage_file_name(stage: int, arch: str, n_stages: int, fmt: str) -> str:
@@ -48,7 +65,7 @@ def arch_mesh(dentition, teeth: Sequence[int], poses: Mapping[int, np.ndarray]):
     """One trimesh of the teeth posed in the arch frame (mm), each tooth a separate closed body."""
     import trimesh
 
-    return trimesh.util.concatenate([dentition.teeth[n].world_mesh(poses[n]) for n in teeth])
+    return trimesh.util.concatenate([printable(dentition.teeth[n].world_mesh(poses[n])) for n in teeth])
 
 
 def _arch_bytes(dentition, teeth, poses, fmt: str) -> bytes:
@@ -57,7 +74,7 @@ def _arch_bytes(dentition, teeth, poses, fmt: str) -> bytes:
 
         scene = trimesh.Scene()
         for n in teeth:
-            scene.add_geometry(dentition.teeth[n].mesh, node_name=f"tooth_{n}", geom_name=f"tooth_{n}",
+            scene.add_geometry(printable(dentition.teeth[n].mesh), node_name=f"tooth_{n}", geom_name=f"tooth_{n}",
                                transform=np.asarray(poses[n], float))
         return scene.export(file_type="glb")
     return arch_mesh(dentition, teeth, poses).export(file_type=fmt)
