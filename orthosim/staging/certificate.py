@@ -106,8 +106,8 @@ def certify(plan, dentition) -> Certificate:
 
 
 def _pair_record(c: PairClearance) -> dict:
-    return {"fdi_a": c.a, "fdi_b": c.b, "min_clearance_mm": round(c.min_mm, 6),
-            "lower_bound_mm": round(c.lower_bound_mm, 6), "at_time": round(c.time, 5),
+    return {"fdi_a": c.a, "fdi_b": c.b, "min_clearance_mm": c.min_mm,
+            "lower_bound_mm": c.lower_bound_mm, "at_time": round(c.time, 5),
             "relative_motion": c.relative_motion, "ipr_mm": round(c.ipr_mm, 4)}
 
 
