@@ -284,7 +284,9 @@ class _DefaultCommandGroup(click.Group):
 
 @main.group(cls=_DefaultCommandGroup)
 def stage() -> None:
-    """Aligner staging: `stage CASE --out DIR` plans a case's set-up, `stage verify DIR` re-checks one."""
+    """Aligner staging: plan a case's set-up, or re-check a written staging.
+
+    `orthosim stage CASE --out DIR` plans (the `plan` command); `orthosim stage verify DIR` checks."""
 
 
 @stage.command("plan")

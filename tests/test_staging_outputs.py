@@ -240,7 +240,7 @@ def test_verify_refuses_a_staging_whose_case_changed(diastema, tmp_path):
     case = tmp_path / "case.toml"
     case.write_text(DIASTEMA.read_text().replace("mesial_mm = 1.0", "mesial_mm = 0.9", 1))
     r = orthosim("stage", "verify", diastema, "--case", case)
-    assert r.returncode == 2 and "has changed since this staging was written" in r.stderr
+    assert r.returncode == 2 and "is not the case file this staging was written from" in r.stderr
 
 
 def test_a_pose_that_is_not_a_rigid_motion_is_refused(diastema, tmp_path):
@@ -265,3 +265,51 @@ def test_the_staging_page_loads_offline_in_chromium_with_its_charts_and_pictures
     assert b"IHDR" in loaded.screenshot_png[:32]
     for name in ("Staging chart", "IPR chart", "Movement table", "Certificate", "First and last stage"):
         assert f"<h2>{name}</h2>" in html
+
+
+def _listing(folder):
+    return sorted((str(p.relative_to(folder)), p.stat().st_size) for p in folder.rglob("*"))
+
+
+def test_stage_into_a_folder_another_run_holds_is_refused_in_one_line(diastema, tmp_path):
+    from orthosim.runtime.outputfolder import output_folder
+
+    out = tmp_path / "held"
+    shutil.copytree(diastema, out)
+    before = _listing(out)
+    with output_folder(out):
+        r = orthosim("stage", DIASTEMA, "--out", out, "--no-render")
+    assert r.returncode == 2 and "another orthosim run" in r.stderr and r.stderr.count("\n") == 1
+    assert _listing(out) == before
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "killpg"), reason="POSIX signals")
+def test_a_staging_stopped_mid_way_leaves_the_earlier_one_whole(diastema, tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from cli_helpers import ROOT
+
+    out = tmp_path / "o"
+    shutil.copytree(diastema, out)
+    before = _listing(out)
+    proc = subprocess.Popen([sys.executable, "-c", "from orthosim.cli import entry; entry()", "stage", str(DIASTEMA),
+                             "--out", str(out), "--no-render"], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not list(tmp_path.glob(".o.orthosim-staging-*")) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert list(tmp_path.glob(".o.orthosim-staging-*")), "the staging never started writing"
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 143, stderr
+    assert _listing(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o"]  # no private folder or lock left

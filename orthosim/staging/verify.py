@@ -86,8 +86,8 @@ def load_for_verify(folder: str | Path, case_path: str | Path | None = None):
         raise StagingFolderError(written.path, "case_file", f"names no case file here ({case_file})",
                                  "give the case with --case PATH")
     if written.case_sha256 is not None and file_sha256(case_file) != written.case_sha256:
-        raise StagingFolderError(case_file, None, "has changed since this staging was written (SHA-256 differs)",
-                                 "stage the case again, or give the case it was staged from with --case")
+        raise StagingFolderError(case_file, None, "is not the case file this staging was written from: it has changed since, or is another (SHA-256 differs)",
+                                 "give the case it was staged from with --case, or stage this one again")
     case = load_case(case_file)
     if case.staging is None or case.staging.target is None:
         raise StagingFolderError(case_file, "target", "missing: this case has nothing staged", "give the staged case with --case")
