@@ -36,6 +36,7 @@ PICTURE_VIEWS = ("maxillary_occlusal", "mandibular_occlusal", "frontal")
 PICTURE_SIZE = (480, 360)
 IPR_COLOR = "#c8202a"
 HELD_COLOR = "#7a7f87"
+COMPONENT_LETTERS = "MBETQR"  # mesial, buccal, extrusion (mm); tip, torque (Q), rotation (degrees)
 
 
 def _figure(w_in: float, h_in: float):
@@ -51,6 +52,12 @@ def _png(fig) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight", metadata={"Software": None})
     return buf.getvalue()
+
+
+def _short(value: float) -> str:
+    """'+.25' for 0.25, '-2.00' for -2: signed, two decimals, no leading zero."""
+    text = f"{value:+.2f}"
+    return text[0] + text[2:] if text[1:3] == "0." else text
 
 
 def staging_chart_png(plan) -> bytes:
@@ -69,7 +76,7 @@ def staging_chart_png(plan) -> bytes:
                 c = chart.amounts[i, k]
                 if chart.limit_use[i, k] > 0:
                     j = int(np.argmax(np.abs(c) / plan.limits.array()))
-                    ax.text(k + 1, i, f"{c[j]:+.2f}"[0] + f"{abs(c[j]):.2f}".lstrip("0"), ha="center", va="center",
+                    ax.text(k + 1, i, COMPONENT_LETTERS[j] + _short(c[j]), ha="center", va="center",
                             fontsize=5.5, color="white" if chart.limit_use[i, k] > 0.6 else "#1d2b3a")
     for stage, n in chart.held:
         ax.plot(stage, row[n], marker="x", color=HELD_COLOR, markersize=5)
@@ -85,8 +92,9 @@ def staging_chart_png(plan) -> bytes:
     ax.tick_params(axis="x", labelsize=7)
     ax.set_xlabel("stage (aligner)")
     ax.set_ylabel("tooth (FDI)")
-    ax.set_title("Staging chart: share of the per-stage limit used (largest component); "
-                 "x held back, \u25c6 IPR before the stage", fontsize=9)
+    ax.set_title("Staging chart: share of the per-stage limit used (largest component); x held back, "
+                 "\u25c6 IPR before the stage\ncells: the largest component (M mesial, B buccal, E extrusion mm; "
+                 "T tip, Q torque, R rotation deg)", fontsize=8)
     cb = fig.colorbar(image, ax=ax, fraction=0.03, pad=0.02)
     cb.set_label("largest |component| / its limit", fontsize=7)
     cb.ax.tick_params(labelsize=7)
