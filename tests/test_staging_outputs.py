@@ -313,3 +313,19 @@ def test_a_staging_stopped_mid_way_leaves_the_earlier_one_whole(diastema, tmp_pa
     assert proc.returncode == 143, stderr
     assert _listing(out) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["o"]  # no private folder or lock left
+
+
+def test_glb_and_ply_stage_models_hold_the_same_teeth_as_the_plan(diastema, dent, tmp_path):
+    from orthosim.staging.models import export_stage_models
+
+    stages = _stages(diastema)
+    poses = [{int(n): np.array(T) for n, T in s["poses"].items()} for s in stages["poses"][:2]]
+    for fmt in ("glb", "ply"):
+        files = export_stage_models(dent, poses, tmp_path / fmt, fmt)
+        assert sorted(p.name for p in files) == sorted(f"stage_{k:02d}_{a}.{fmt}" for k in (0, 1) for a in ("upper", "lower"))
+    scene = trimesh.load(tmp_path / "glb" / "stage_01_upper.glb")
+    assert sorted(scene.graph.nodes_geometry) == sorted(f"tooth_{n}" for n in poses[1] if F.quadrant(n) in (1, 2))
+    T, _ = scene.graph["tooth_11"]
+    np.testing.assert_allclose(T, poses[1][11], atol=1e-6)  # the pose at stage 1, mm
+    ply = trimesh.load(tmp_path / "ply" / "stage_01_lower.ply")
+    assert len(ply.split(only_watertight=True)) == 14
