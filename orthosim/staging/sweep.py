@@ -46,28 +46,44 @@ class Clearance:
 
 class PairMotion:
     """Teeth a and b over one stage: FCL objects of their meshes (shared, re-posed on each query),
-    the farthest vertex of each from its local origin (mm), and both motions (4, 4) T0 -> T1."""
+    the farthest vertex of each from its local origin (mm), and both motions (4, 4) T0 -> T1.
 
-    def __init__(self, obj_a, rho_a: float, Ta0, Ta1, obj_b, rho_b: float, Tb0, Tb1):
+    At t = 0 and t = 1 the end poses themselves are used (bit for bit, not re-interpolated), and
+    distances there are kept in `memo` (shared by the caller across stages, keyed by the two
+    poses' bytes): a stage's end is the next one's start, and teeth at rest keep their poses."""
+
+    def __init__(self, obj_a, rho_a: float, Ta0, Ta1, obj_b, rho_b: float, Tb0, Tb1, memo: dict | None = None):
         self.obj_a, self.obj_b = obj_a, obj_b
         self.path_a, self.path_b = PosePath(Ta0, Ta1), PosePath(Tb0, Tb1)
         self.mu = relative_speed_bound(Ta0, Ta1, rho_a, Tb0, Tb1, rho_b)  # mm per unit stage time
+        self.memo = {} if memo is None else memo
         self.queries = 0
 
-    def _place(self, t: float) -> None:
-        meshquery.set_pose(self.obj_a, self.path_a.at(t))
-        meshquery.set_pose(self.obj_b, self.path_b.at(t))
+    def _poses(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        if t == 1.0:
+            return self.path_a.T1, self.path_b.T1
+        return self.path_a.at(t), self.path_b.at(t)
 
     def intersects(self, t: float) -> bool:
-        self._place(t)
+        Ta, Tb = self._poses(t)
+        meshquery.set_pose(self.obj_a, Ta)
+        meshquery.set_pose(self.obj_b, Tb)
         self.queries += 1
         return meshquery.collide(self.obj_a, self.obj_b)[0]
 
     def distance(self, t: float) -> float:
         """mm between the meshes at time t (0.0 when they intersect)."""
-        self._place(t)
+        Ta, Tb = self._poses(t)
+        key = (id(self.obj_a), id(self.obj_b), Ta.tobytes(), Tb.tobytes()) if t in (0.0, 1.0) else None
+        if key is not None and key in self.memo:
+            return self.memo[key]
+        meshquery.set_pose(self.obj_a, Ta)
+        meshquery.set_pose(self.obj_b, Tb)
         self.queries += 1
-        return meshquery.distance(self.obj_a, self.obj_b)
+        d = meshquery.distance(self.obj_a, self.obj_b)
+        if key is not None:
+            self.memo[key] = d
+        return d
 
 
 def min_clearance(motion: PairMotion, tolerance_mm: float = 1e-3, reach_mm: float = math.inf) -> Clearance:
@@ -76,11 +92,12 @@ def min_clearance(motion: PairMotion, tolerance_mm: float = 1e-3, reach_mm: floa
     reach_mm: stop as soon as the pair is proven never to come within this distance (the
     answer's lower bound then exceeds reach_mm, and min_mm is the best sample so far).
     """
-    d0, d1 = motion.distance(0.0), motion.distance(1.0)
-    best, best_t = (d0, 0.0) if d0 <= d1 else (d1, 1.0)
+    d0 = motion.distance(0.0)
     mu = motion.mu
     if mu <= 0.0:  # no relative motion: the distance is constant
-        return Clearance(best, best, best_t, motion.queries)
+        return Clearance(d0, d0, 0.0, motion.queries)
+    d1 = motion.distance(1.0)
+    best, best_t = (d0, 0.0) if d0 <= d1 else (d1, 1.0)
     heap = [(0.5 * (d0 + d1 - mu), 0.0, 1.0, d0, d1)]
     lower = heap[0][0]
     while heap:
@@ -158,6 +175,7 @@ class ToothBodies:
         self.centre = {n: np.asarray(m.bounds, float).mean(axis=0) for n, m in meshes.items()}
         self.radius = {n: float(np.linalg.norm(np.asarray(m.vertices, float) - self.centre[n], axis=1).max())
                        for n, m in meshes.items()}
+        self.memo: dict = {}  # end-of-stage distances, shared by every PairMotion made here
         self.shifts: Shifts = {}
         for (a, b), (sa, sb) in (shifts or {}).items():
             self.shifts[(a, b)] = (np.asarray(sa, float), np.asarray(sb, float))
@@ -172,7 +190,7 @@ class ToothBodies:
                 T[:3, 3] += s[0]
             for T in (Tb0, Tb1):
                 T[:3, 3] += s[1]
-        return PairMotion(self.objects[a], self.rho[a], Ta0, Ta1, self.objects[b], self.rho[b], Tb0, Tb1)
+        return PairMotion(self.objects[a], self.rho[a], Ta0, Ta1, self.objects[b], self.rho[b], Tb0, Tb1, self.memo)
 
     def near_pairs(self, P0: dict, P1: dict, reach_mm: float) -> list[tuple[int, int]]:
         """(a, b) with a < b of every pair that may come within reach_mm of each other during the
