@@ -329,3 +329,13 @@ def test_glb_and_ply_stage_models_hold_the_same_teeth_as_the_plan(diastema, dent
     np.testing.assert_allclose(T, poses[1][11], atol=1e-6)  # the pose at stage 1, mm
     ply = trimesh.load(tmp_path / "ply" / "stage_01_lower.ply")
     assert len(ply.split(only_watertight=True)) == 14
+
+
+def test_verify_refuses_an_inflated_reduction_that_would_hide_a_contact(crowding, tmp_path):
+    def edit(data):
+        data["ipr"][0]["ipr_mm"] = 2.0  # 41/42 overlap by about 0.58 mm at the target
+
+    bad = _edited_copy(crowding, tmp_path / "ipr", edit)
+    r = orthosim("stage", "verify", bad)
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "stage 1: ipr: IPR of 41/42 (2.000 mm): more than the teeth overlap at the target (0.58" in r.stdout

@@ -18,7 +18,11 @@ collision model. What is checked, in stage order (the first failure is the one n
      sampled at a few hundred times, skipping only times that an FCL distance already proves free.
      A pair with interproximal reduction is tested reduced as the planner modelled it
      (`staging.ipr`: moved apart along the recorded direction by half the reduction each);
-  5. the last stage is the case's target (every pose within `TARGET_ATOL_MM`).
+  5. the last stage is the case's target (every pose within `TARGET_ATOL_MM`);
+  6. each recorded interproximal reduction is earned: the two teeth are arch neighbours, the
+     direction is the one between their crown centres at the target, and the amount is no more
+     than their exact overlap along it at the target (`ipr.penetration_along`, + its resolution):
+     an inflated reduction would move the pair apart in step 4 and hide a real contact.
 A damaged or inconsistent folder raises StagingFolderError (exit 2); violations are returned.
 """
 
@@ -121,11 +125,13 @@ def verify_staging(written: WrittenStaging, dentition, start: dict, target: dict
     for k in range(1, written.n_stages + 1):
         _limits(verdict, dentition, start, written.teeth, k, P[k - 1], P[k], limits)
         _contacts(verdict, bodies, k, P[k - 1], P[k], step_mm)
+    _ipr(verdict, written, dentition, target, bodies)
     last = written.n_stages
     for n in written.teeth:
         off = float(np.abs(P[last][n] - target[n]).max())
         if off > TARGET_ATOL_MM:
             verdict.violations.append(Violation(last, "target", f"tooth {n} ends off its target (pose entries differ by up to {off:.4g})"))
+    verdict.violations.sort(key=lambda v: v.stage)  # stable: in a stage, limits, contacts, target, IPR
     verdict.seconds = time.perf_counter() - began
     return verdict
 
@@ -150,3 +156,25 @@ def _contacts(verdict: Verdict, bodies: ToothBodies, k: int, P0: dict, P1: dict,
         if t is not None:
             when = "at the start" if k == 0 else f"at {100 * t:.1f} % of the motion from stage {k - 1}"
             verdict.violations.append(Violation(k, "contact", f"teeth {a} and {b} intersect {when}"))
+
+
+def _ipr(verdict: Verdict, written: WrittenStaging, dentition, target: dict, bodies: ToothBodies) -> None:
+    from orthosim.collision.broadphase import arch_neighbour_pairs
+    from orthosim.staging.ipr import RESOLUTION_MM, penetration_along
+
+    neighbours = {tuple(sorted(p)) for p in arch_neighbour_pairs(written.teeth)}
+    for r in written.ipr:
+        a, b = r.a, r.b
+        name = f"IPR of {a}/{b} ({r.amount_mm:.3f} mm)"
+        if (min(a, b), max(a, b)) not in neighbours:
+            verdict.violations.append(Violation(1, "ipr", f"{name}: the two teeth are not arch neighbours"))
+            continue
+        ca = dentition.teeth[a].to_world(dentition.teeth[a].crown_center, target[a])
+        cb = dentition.teeth[b].to_world(dentition.teeth[b].crown_center, target[b])
+        u = (cb - ca) / np.linalg.norm(cb - ca)
+        if np.abs(u - r.direction).max() > 1e-6:
+            verdict.violations.append(Violation(1, "ipr", f"{name}: its direction is not from {a}'s crown centre to {b}'s at the target"))
+            continue
+        overlap = penetration_along(bodies.objects[a], target[a], bodies.objects[b], target[b], u)
+        if r.amount_mm > overlap + RESOLUTION_MM:
+            verdict.violations.append(Violation(1, "ipr", f"{name}: more than the teeth overlap at the target ({overlap:.3f} mm)"))
