@@ -427,9 +427,8 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
     overlapping stops there. A pair in contact at the step's start is tested only when the move
     takes the two into each other (`_approaching`, `_sinking`).
     """
-    s = model.settings
     dt = float(model.case.step_days)
-    P, queries = state.poses, state.queries
+    P = state.poses
     P1 = dict(P)
     for n, m in moves.items():
         P1[n] = m.apply(P[n], dt)
@@ -455,46 +454,8 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
         return out
 
     if state.detector.sweeps:
-        tcut = {n: 1.0 for n in moves}
-        done: set = set()
-        request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=True,
-                                   contact_tolerance_mm=s.contact_tolerance_mm, drawn_leaves=False)
-        for _ in range(s.rounds):
-            current = {n: m for n, m in moves.items() if tcut[n] > 0}
-            pairs = tested(_scaled(current, tcut), done)
-            tested_pairs.update(pairs)
-            if not pairs:
-                break
-            res = detect_step(model.collision, P, P1, pairs, state.detector, request, queries=queries)
-            found = [(tuple(map(int, pr)), float(t)) for pr, t in zip(res.pairs, res.time_of_first_contact) if not np.isnan(t)]
-            if not found:
-                break
-            for pair, t in found:
-                done.add(pair)
-                if pair in touching_set:
-                    continue  # a contact held from the last step stops the tooth; it is no new collision
-                P_at = dict(P1)
-                for n in pair:
-                    if n in tcut:
-                        P_at[n] = interpolate_pose(P[n], P1[n], t)
-                hits.append(Hit(pair, t * _frac(tcut, pair), P_at))
-            cut: dict[int, float] = {}
-            scaled = _scaled(moves, tcut)
-            for pair, t in found:
-                for n in _at_fault(model, pair, scaled, dt, centers):
-                    if n in tcut:
-                        cut[n] = min(cut.get(n, 1.0), t)
-            for n, t in cut.items():
-                P1[n] = interpolate_pose(P[n], P1[n], t)
-                tcut[n] *= t
-        # The sliding allowance was checked at the intended end of each move; a move cut short
-        # by another contact may stop mid-way over a cusp, deeper than its end would be: such a
-        # tooth keeps its start pose, so the bound holds on the poses a step leaves.
-        for pair in touching_set if model.closure is None else ():  # with a closure, the arches' contacts are its
-            if pair in model.facing and any(P1[n] is not P[n] for n in pair) and \
-                    queries.penetration(pair, P1) - state.rest_depths.get(pair, 0.0) > state.slide_allowance(model, pair):
-                for n in pair:
-                    P1[n] = P[n]
+        _cut_back(model, state, moves, P1, tested, centers, hits, tested_pairs)
+        _hold_slides_within_allowance(model, state, P1)
     else:
         pairs = tested(moves, set())
         tested_pairs.update(pairs)
@@ -502,6 +463,61 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
             res = detect_step(model.collision, P, P1, pairs, state.detector)
             hits.extend(Hit(pair, 1.0, P1) for pair in res.touching_pairs() if pair not in touching_set)
     return Detection(P1, tuple(hits), frozenset(tested_pairs))
+
+
+def _cut_back(model: MovementModel, state: StepState, moves: dict[int, Motion], P1: dict, tested: Callable,
+              centers: Mapping[int, np.ndarray], hits: list, tested_pairs: set) -> None:
+    """A sweeping detector's rounds: every mover cut back to its earliest time of first contact
+    (cutting one tooth may put it in another's way); `P1` (FDI -> end pose) is cut in place, new
+    contacts appended to `hits`, the pairs asked added to `tested_pairs`."""
+    s, P, queries = model.settings, state.poses, state.queries
+    dt = float(model.case.step_days)
+    touching_set = set(state.touching)
+    tcut = {n: 1.0 for n in moves}
+    done: set = set()
+    request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=True,
+                               contact_tolerance_mm=s.contact_tolerance_mm, drawn_leaves=False)
+    for _ in range(s.rounds):
+        current = {n: m for n, m in moves.items() if tcut[n] > 0}
+        pairs = tested(_scaled(current, tcut), done)
+        tested_pairs.update(pairs)
+        if not pairs:
+            break
+        res = detect_step(model.collision, P, P1, pairs, state.detector, request, queries=queries)
+        found = [(tuple(map(int, pr)), float(t)) for pr, t in zip(res.pairs, res.time_of_first_contact) if not np.isnan(t)]
+        if not found:
+            break
+        for pair, t in found:
+            done.add(pair)
+            if pair in touching_set:
+                continue  # a contact held from the last step stops the tooth; it is no new collision
+            P_at = dict(P1)
+            for n in pair:
+                if n in tcut:
+                    P_at[n] = interpolate_pose(P[n], P1[n], t)
+            hits.append(Hit(pair, t * _frac(tcut, pair), P_at))
+        cut: dict[int, float] = {}
+        scaled = _scaled(moves, tcut)
+        for pair, t in found:
+            for n in _at_fault(model, pair, scaled, dt, centers):
+                if n in tcut:
+                    cut[n] = min(cut.get(n, 1.0), t)
+        for n, t in cut.items():
+            P1[n] = interpolate_pose(P[n], P1[n], t)
+            tcut[n] *= t
+
+
+def _hold_slides_within_allowance(model: MovementModel, state: StepState, P1: dict) -> None:
+    """The sliding allowance was checked at the intended end of each move; a move cut short by
+    another contact may stop mid-way over a cusp, deeper than its end would be: such a tooth keeps
+    its start pose (in `P1`), so the bound holds on the poses a step leaves. With a closure, the
+    arches' contacts are the closure's."""
+    P, queries = state.poses, state.queries
+    for pair in set(state.touching) if model.closure is None else ():
+        if pair in model.facing and any(P1[n] is not P[n] for n in pair) and \
+                queries.penetration(pair, P1) - state.rest_depths.get(pair, 0.0) > state.slide_allowance(model, pair):
+            for n in pair:
+                P1[n] = P[n]
 
 
 def _sinking(model: MovementModel, state: StepState, pair, end: Mapping[int, np.ndarray]) -> bool:
