@@ -333,6 +333,34 @@ class _Progress:
             self.bar.close()
 
 
+def _draw_frames(states, renderer, scene, views, overlay, sink, split_views: bool, on_frame, bar, interrupted) -> tuple[int, float]:
+    """Draw each state (once per distinct state: a state given twice in a row repeats its image),
+    overlay it, hand the frame to the sink; returns (frames handed over, seconds spent drawing)."""
+    started = time.perf_counter()
+    previous = images = frame = None
+    render_s, n = 0.0, 0
+    for state in states:
+        if state is not previous:
+            t0 = time.perf_counter()
+            scene.update(state)
+            images = [renderer.render(scene, v) for v in views]
+            render_s += time.perf_counter() - t0
+            if overlay is not None:  # labels drawn in place, once per distinct state
+                for v, image in zip(views, images):
+                    overlay.label(image, scene.view(v), state)
+                frame = overlay.caption_frame(tile(images), state)
+            else:
+                frame = tile(images)
+            previous = state
+        sink.add(frame, images if split_views else ())
+        if on_frame is not None:
+            on_frame(state, scene)
+        n += 1
+        bar.update(n, n / max(time.perf_counter() - started, 1e-9))
+        interrupted()
+    return n, render_s
+
+
 def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, views: Sequence[str] = ("frontal",),
                size: tuple[int, int] = (640, 480), gif: bool = False, alpha: bool = False, progress: bool = True,
                hide_roots: bool = False, color_contact_faces: bool = False, png: bool = True, mp4: bool = True,
@@ -383,31 +411,11 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
         overlay = FrameOverlay(caption, dentition, size)
     dentition.drop_mesh_caches()  # the scene and overlay keep their own arrays; the meshes' derived ones go
     release_freed_heap()
-    render_s = 0.0
-    n = 0
     try:
         with Renderer(size, alpha=alpha) as renderer, _interrupt_between_frames() as interrupted:
             started = time.perf_counter()
-            previous = images = frame = None
-            for state in (frames if single_core else prefetch(frames)):
-                if state is not previous:
-                    t0 = time.perf_counter()
-                    scene.update(state)
-                    images = [renderer.render(scene, v) for v in views]
-                    render_s += time.perf_counter() - t0
-                    if overlay is not None:  # labels drawn in place, once per distinct state
-                        for v, image in zip(views, images):
-                            overlay.label(image, scene.view(v), state)
-                        frame = overlay.caption_frame(tile(images), state)
-                    else:
-                        frame = tile(images)
-                    previous = state
-                sink.add(frame, images if split_views else ())
-                if on_frame is not None:
-                    on_frame(state, scene)
-                n += 1
-                bar.update(n, n / max(time.perf_counter() - started, 1e-9))
-                interrupted()
+            n, render_s = _draw_frames(frames if single_core else prefetch(frames), renderer, scene, views, overlay, sink,
+                                       split_views, on_frame, bar, interrupted)
             interrupted()
             t_close = time.perf_counter()
             written = sink.close()

@@ -58,55 +58,10 @@ def load_open_full_jaw(folder: str | Path | Sequence[str | Path],
     """
     folders = scan_folders(folder)
     where = folders[0] if len(folders) == 1 else " + ".join(str(f) for f in folders)
-    files: dict[int, Path] = {}
-    axes_raw: dict = {}
-    axes_file_of: dict[str, Path] = {}
-    for f in folders:
-        if not f.is_dir():
-            raise MeshError(f, None, "folder not found", "check the path to the Open-Full-Jaw folder")
-        for path in sorted(f.iterdir()):
-            match = _TOOTH_FILE.match(path.name)
-            if match:
-                universal = int(match.group(1))
-                if universal in files:
-                    raise MeshError(path, None, f"tooth {universal} is also in {files[universal]}",
-                                    "give each tooth once across the scan's folders")
-                files[universal] = path
-        raw, axes_file = _read_axes(f)
-        for key, entry in raw.items():
-            axes_raw[key] = entry
-            axes_file_of[key] = axes_file
-    if len(files) < 3:
-        raise MeshError(where, None, f"holds {len(files)} tooth_N.stl files; the arch frame needs at least 3 teeth",
-                        "point to an Open-Full-Jaw maxilla or mandible folder")
-
-    fdi_of: dict[int, int] = {}
-    for universal in files:
-        try:
-            fdi_of[universal] = fdi_mod.universal_to_fdi(universal)
-        except ValueError:
-            raise MeshError(files[universal], None, f"{universal} is not a Universal tooth number (1-32)",
-                            "rename the file tooth_N.stl with N in 1-32") from None
-
-    axes: dict[int, ToothAxes] = {}
-    x_end, meshes = {}, {}
-    for universal, path in files.items():
-        n = fdi_of[universal]
-        meshes[n] = load_tooth_mesh(path, max_triangles=max_triangles)
-        if str(universal) not in axes_raw:
-            continue
-        axes_file = axes_file_of[str(universal)]
-        c, xe, ye, ze = (_point(axes_raw, axes_file, universal, key) for key in ("c", "x", "y", "z"))
-        x_end[n] = xe - c
-        long_axis = _unit(ze - c, axes_file, f"{universal}.z")
-        # The dataset's z points root -> crown; a flipped entry would put the root on top, so
-        # check it against the mesh: the crown centre is nearer the crown end than the apex.
-        along = (meshes[n].vertices - c) @ long_axis
-        if along.max() > -along.min():
-            warnings.warn(f"{axes_file}: {universal}.z points toward the root of {path.name}; reversed it",
-                          MeshRepairWarning, stacklevel=2)
-            long_axis = -long_axis
-        axes[n] = ToothAxes(long_axis=long_axis, labial=_unit(ye - c, axes_file, f"{universal}.y"), point=c)
+    files, axes_raw, axes_file_of = _scan_files(folders, where)
+    fdi_of = _fdi_numbers(files)
+    meshes = {fdi_of[u]: load_tooth_mesh(path, max_triangles=max_triangles) for u, path in files.items()}
+    axes, x_end = _given_axes(files, fdi_of, meshes, axes_raw, axes_file_of)
     given = set(axes)
     if len(given) < 3:
         raise MeshError(where, None, f"only {len(given)} teeth have an axes entry; the arch frame needs at least 3",
@@ -138,6 +93,69 @@ def load_open_full_jaw(folder: str | Path | Sequence[str | Path],
         "json_x_sense": x_sense,
     })
     return report_rest_interpenetration(dentition, where)
+
+
+def _scan_files(folders: list[Path], where) -> tuple[dict[int, Path], dict, dict[str, Path]]:
+    """Universal number -> tooth file, the axes entries and the axes file each came from, over the
+    scan's folders; MeshError on a missing folder, a tooth given twice or fewer than 3 teeth."""
+    files: dict[int, Path] = {}
+    axes_raw: dict = {}
+    axes_file_of: dict[str, Path] = {}
+    for f in folders:
+        if not f.is_dir():
+            raise MeshError(f, None, "folder not found", "check the path to the Open-Full-Jaw folder")
+        for path in sorted(f.iterdir()):
+            match = _TOOTH_FILE.match(path.name)
+            if match:
+                universal = int(match.group(1))
+                if universal in files:
+                    raise MeshError(path, None, f"tooth {universal} is also in {files[universal]}",
+                                    "give each tooth once across the scan's folders")
+                files[universal] = path
+        raw, axes_file = _read_axes(f)
+        for key, entry in raw.items():
+            axes_raw[key] = entry
+            axes_file_of[key] = axes_file
+    if len(files) < 3:
+        raise MeshError(where, None, f"holds {len(files)} tooth_N.stl files; the arch frame needs at least 3 teeth",
+                        "point to an Open-Full-Jaw maxilla or mandible folder")
+    return files, axes_raw, axes_file_of
+
+
+def _fdi_numbers(files: dict[int, Path]) -> dict[int, int]:
+    """Universal -> FDI of each tooth file; MeshError naming a file whose number is not Universal."""
+    fdi_of: dict[int, int] = {}
+    for universal in files:
+        try:
+            fdi_of[universal] = fdi_mod.universal_to_fdi(universal)
+        except ValueError:
+            raise MeshError(files[universal], None, f"{universal} is not a Universal tooth number (1-32)",
+                            "rename the file tooth_N.stl with N in 1-32") from None
+    return fdi_of
+
+
+def _given_axes(files, fdi_of, meshes, axes_raw, axes_file_of) -> tuple[dict[int, ToothAxes], dict[int, np.ndarray]]:
+    """The dataset's own axes (FDI -> ToothAxes, scan frame) of the teeth that have an entry, and
+    each one's json x direction (for the record of its sense)."""
+    axes: dict[int, ToothAxes] = {}
+    x_end = {}
+    for universal, path in files.items():
+        n = fdi_of[universal]
+        if str(universal) not in axes_raw:
+            continue
+        axes_file = axes_file_of[str(universal)]
+        c, xe, ye, ze = (_point(axes_raw, axes_file, universal, key) for key in ("c", "x", "y", "z"))
+        x_end[n] = xe - c
+        long_axis = _unit(ze - c, axes_file, f"{universal}.z")
+        # The dataset's z points root -> crown; a flipped entry would put the root on top, so
+        # check it against the mesh: the crown centre is nearer the crown end than the apex.
+        along = (meshes[n].vertices - c) @ long_axis
+        if along.max() > -along.min():
+            warnings.warn(f"{axes_file}: {universal}.z points toward the root of {path.name}; reversed it",
+                          MeshRepairWarning, stacklevel=3)
+            long_axis = -long_axis
+        axes[n] = ToothAxes(long_axis=long_axis, labial=_unit(ye - c, axes_file, f"{universal}.y"), point=c)
+    return axes, x_end
 
 
 def _arch_neighbours(n: int, given) -> list[int]:
