@@ -36,7 +36,8 @@ BUILDER_VERSION = 1
 _BUILDER_MODULES = ("model/anatomy", "model/archform", "model/dentition", "model/fdi", "collision/interpenetration",
                     "exchange/meshload", "geometry/meshrefine", "analysis/occlusion", "exchange/openfulljaw",
                     "model/parametric", "exchange/scanfolders", "exchange/scanframe", "model/tooth", "model/toothshape",
-                    "geometry/meshquery", "geometry/penetration")
+                    "geometry/meshquery", "geometry/penetration",
+                    "model/rootsynthesis", "exchange/labelledscan", "geometry/meshcut")
 _PACKAGE = Path(__file__).resolve().parents[1]  # orthosim/
 
 
@@ -93,9 +94,12 @@ def save_dentition(dent, path: str | Path, raised: list[tuple[str, str]] = ()) -
         arrays[f"{n}_rest_pose"] = np.asarray(t.rest_pose, np.float64)
         for name, p in t.landmarks.items():
             arrays[f"{n}_landmark_{name}"] = np.asarray(p, np.float64)
-        teeth.append({"fdi": n, "source": t.source, "landmarks": list(t.landmarks)})
+        teeth.append({"fdi": n, "source": t.source, "landmarks": list(t.landmarks), "root": t.root_origin})
+    for name, gum in dent.gingiva.items():
+        arrays[f"gingiva_{name}_vertices"] = np.asarray(gum.vertices, np.float64)
+        arrays[f"gingiva_{name}_faces"] = np.asarray(gum.faces, np.int64)
     header = {"description": dent.description, "info": _jsonable(dent.info), "teeth": teeth,
-              "warnings": [list(w) for w in raised]}
+              "warnings": [list(w) for w in raised], "gingiva": list(dent.gingiva)}
     arrays["header"] = np.array(json.dumps(header))
     with atomic_path(path, suffix=".npz") as tmp:
         with open(tmp, "wb") as fh:
@@ -118,8 +122,16 @@ def load_dentition(path: str | Path):
             teeth[n] = Tooth(fdi=n, mesh=mesh, face_part=z[f"{n}_face_part"], crown_center=z[f"{n}_crown_center"],
                              apex=z[f"{n}_apex"], rest_pose=z[f"{n}_rest_pose"],
                              landmarks={name: z[f"{n}_landmark_{name}"] for name in entry["landmarks"]},
-                             source=entry["source"])
-    return Dentition(teeth, header["description"], header["info"]), [tuple(w) for w in header["warnings"]]
+                             source=entry["source"], root_origin=_root_origin(entry.get("root", "scan")))
+        gingiva = {name: trimesh.Trimesh(z[f"gingiva_{name}_vertices"], z[f"gingiva_{name}_faces"], process=False)
+                   for name in header.get("gingiva", [])}
+    return Dentition(teeth, header["description"], header["info"], gingiva), [tuple(w) for w in header["warnings"]]
+
+
+def _root_origin(value) -> str:
+    if value not in ("scan", "estimated"):
+        raise ValueError(f"unknown root origin {value!r}")  # a damaged entry: read as a miss and rebuilt
+    return value
 
 
 def _warning_class(qualified: str) -> type[Warning]:
@@ -171,4 +183,4 @@ def cached_dentition(parameters: Mapping, build: Callable[[], object], input_fil
     except OSError:
         pass  # a read-only or full cache folder costs a rebuild next time, never a failure
     _replay(raised)
-    return Dentition(built.teeth, built.description, _jsonable(built.info))
+    return Dentition(built.teeth, built.description, _jsonable(built.info), built.gingiva)

@@ -1,0 +1,78 @@
+"""Labelled intraoral arch scans made from any dentition, for tests and the bench (never from committed data).
+
+A scan is crowns only: each tooth is cut at its CEJ (its local y = 0, `orthosim.model.tooth`), and
+a gum collar (two rings, 1.5 and 3 mm out from the margin and down toward the root) is hung from
+its margin, labelled 0; everything is written as one OBJ per arch with a Teeth3DS-style JSON beside
+it (`id_patient`, `jaw`, per-vertex `labels` and `instances`), in the dentition's arch frame (mm).
+`subdivisions` splits every crown triangle into four that many times, to reach real scan sizes
+(100k-500k triangles per arch).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from orthosim.geometry.meshcut import keep_above_plane
+from orthosim.model import fdi as fdi_mod
+from orthosim.model.rootsynthesis import boundary_loops
+
+
+def crown_at_cej(tooth) -> trimesh.Trimesh:
+    """The tooth's crown, cut open at its CEJ plane, in the arch frame at its rest pose (mm)."""
+    crown = keep_above_plane(tooth.mesh, [0.0, 1.0, 0.0], [0.0, 0.0, 0.0])
+    pieces = crown.split(only_watertight=False)
+    crown = max(pieces, key=lambda p: len(p.faces)) if len(pieces) > 1 else crown
+    crown.apply_transform(tooth.rest_pose)
+    return crown
+
+
+def _collar(crown: trimesh.Trimesh, tooth) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(new vertices, faces over crown + new vertex indices, margin loop) of a gum collar under the crown's margin."""
+    loop = max(boundary_loops(crown), key=len)
+    margin = crown.vertices[loop]
+    axis = tooth.rest_pose[:3, 1]
+    centre = margin.mean(axis=0)
+    radial = margin - centre
+    radial -= np.outer(radial @ axis, axis)
+    radial /= np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-9)
+    n = len(crown.vertices)
+    rings = [margin + 1.5 * radial - 1.0 * axis, margin + 3.0 * radial - 2.0 * axis]
+    faces, prev = [], loop
+    for k in range(2):
+        cur = n + k * len(loop) + np.arange(len(loop))
+        p1, c1 = np.roll(prev, -1), np.roll(cur, -1)
+        faces += [np.column_stack([p1, prev, cur]), np.column_stack([p1, cur, c1])]
+        prev = cur
+    return np.vstack(rings), np.vstack(faces), loop
+
+
+def write_labelled_arch(dentition, jaw: str, folder: str | Path, stem: str = "scan", subdivisions: int = 0,
+                        suffix: str = ".obj") -> Path:
+    """Write `<stem>_<jaw><suffix>` and `<stem>_<jaw>.json` for one arch of `dentition`; returns the mesh path."""
+    arch = fdi_mod.Arch.UPPER if jaw == "upper" else fdi_mod.Arch.LOWER
+    vertices, faces, labels = [], [], []
+    count = 0
+    for n in dentition.arch(arch):
+        tooth = dentition.teeth[n]
+        crown = crown_at_cej(tooth)
+        for _ in range(subdivisions):
+            crown = crown.subdivide()
+        ring, collar_faces, _ = _collar(crown, tooth)
+        vertices += [crown.vertices, ring]
+        faces += [crown.faces + count, collar_faces + count]
+        labels += [np.full(len(crown.vertices), n), np.zeros(len(ring), int)]
+        count += len(crown.vertices) + len(ring)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{stem}_{jaw}{suffix}"
+    trimesh.Trimesh(np.vstack(vertices), np.vstack(faces), process=False).export(path)
+    all_labels = np.concatenate(labels).tolist()
+    instances = [0 if v == 0 else i + 1 for i, v in enumerate(sorted(set(all_labels)))]
+    lookup = dict(zip(sorted(set(all_labels)), instances))
+    (folder / f"{stem}_{jaw}.json").write_text(json.dumps({
+        "id_patient": stem, "jaw": jaw, "labels": all_labels, "instances": [lookup[v] for v in all_labels]}))
+    return path
