@@ -130,6 +130,8 @@ def _submesh(mesh: trimesh.Trimesh, faces: np.ndarray) -> trimesh.Trimesh:
 def _one_piece(crown: trimesh.Trimesh, scan: LabelledScan, n: int) -> trimesh.Trimesh:
     """The crown's one connected piece; specks beside it dropped (warned), a second real piece refused."""
     crown.merge_vertices()
+    crown.update_faces(crown.nondegenerate_faces())  # zero-area slivers are no piece of a crown
+    crown.remove_unreferenced_vertices()
     pieces = crown.split(only_watertight=False)
     if len(pieces) <= 1:
         return crown

@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+ON_PLANE_MM = 1e-6  # a vertex this close to the plane lies on it
+
 
 def keep_above_plane(mesh: trimesh.Trimesh, normal: np.ndarray, point: np.ndarray) -> trimesh.Trimesh:
     """The part of `mesh` on the `normal` (3,) side of the plane through `point` (3,) mm, open along the cut.
@@ -21,8 +23,8 @@ def keep_above_plane(mesh: trimesh.Trimesh, normal: np.ndarray, point: np.ndarra
     """
     normal = np.asarray(normal, float) / np.linalg.norm(normal)
     d = (np.asarray(mesh.vertices, float) - np.asarray(point, float)) @ normal
-    d = np.where(np.abs(d) < 1e-9, 1e-9, d)  # a vertex on the plane counts as kept
-    above = d > 0
+    on_plane = np.abs(d) < ON_PLANE_MM  # kept, and a cut through it is the vertex itself (no sliver)
+    above = (d > 0) | on_plane
     faces = np.asarray(mesh.faces, np.int64)
     inside = above[faces]
     whole = faces[inside.all(axis=1)]
@@ -33,6 +35,8 @@ def keep_above_plane(mesh: trimesh.Trimesh, normal: np.ndarray, point: np.ndarra
 
     def cut(a: int, b: int) -> int:
         nonlocal count
+        if on_plane[a] or on_plane[b]:
+            return a if on_plane[a] else b
         key = (min(a, b), max(a, b))
         if key not in new_index:
             t = d[key[0]] / (d[key[0]] - d[key[1]])
@@ -53,7 +57,9 @@ def keep_above_plane(mesh: trimesh.Trimesh, normal: np.ndarray, point: np.ndarra
             clipped.append((a, ab, ac))
         else:
             clipped += [(ab, b, c), (ab, c, ac)]
-    all_faces = np.vstack([whole, np.array(clipped, np.int64).reshape(-1, 3)])
+    clipped = np.array(clipped, np.int64).reshape(-1, 3)
+    clipped = clipped[(clipped[:, 0] != clipped[:, 1]) & (clipped[:, 1] != clipped[:, 2]) & (clipped[:, 0] != clipped[:, 2])]
+    all_faces = np.vstack([whole, clipped])
     out = trimesh.Trimesh(np.vstack(vertices), all_faces, process=False)
     out.remove_unreferenced_vertices()
     return out
