@@ -1,0 +1,168 @@
+"""Labelled intraoral scans: crowns split by label get estimated roots, the gum is kept apart, bad label files are refused.
+
+The scans are made at test time from the parametric model (`orthosim_bench.scanarch`: each crown
+cut at its CEJ, a gum collar under it, a Teeth3DS-style JSON beside the OBJ), so the true roots
+are known and nothing derived from real data is stored.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cli_helpers import orthosim
+from orthosim.errors import MeshError
+from orthosim.exchange.labelledscan import load_labelled_scans, read_labelled_scan, split_scan
+from orthosim.model.rootsynthesis import boundary_loops, synthesize_root
+from orthosim.movement.resistance import center_of_resistance
+from orthosim_bench.scanarch import crown_at_cej, write_labelled_arch
+
+
+@pytest.fixture(scope="module")
+def model():
+    from orthosim.model.parametric import parametric_dentition
+
+    return parametric_dentition("medium")
+
+
+@pytest.fixture(scope="module")
+def scans(model, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("scans")
+    return write_labelled_arch(model, "upper", folder, "p1"), write_labelled_arch(model, "lower", folder, "p1")
+
+
+@pytest.fixture(scope="module")
+def scanned(scans):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return load_labelled_scans(*scans)
+
+
+def test_every_labelled_tooth_becomes_a_closed_tooth_with_an_estimated_root(model, scanned):
+    assert set(scanned.teeth) == set(model.teeth)
+    for tooth in scanned.teeth.values():
+        assert tooth.root_origin == "estimated" and tooth.root_kind == "estimated"
+        assert tooth.mesh.is_watertight and tooth.mesh.is_winding_consistent and tooth.mesh.volume > 0
+        assert (tooth.face_part == 1).any()  # it has root faces below its CEJ
+
+
+def test_the_gum_is_its_own_mesh_and_never_enters_the_collision_model(scanned):
+    from orthosim.collision.model import CollisionModel
+
+    assert set(scanned.gingiva) == {"upper", "lower"}
+    assert all(len(g.faces) > 100 for g in scanned.gingiva.values())
+    collision = CollisionModel.from_dentition(scanned)
+    assert sorted(collision.keys) == sorted(scanned.teeth)
+
+
+def test_the_scanned_bite_is_kept_between_the_arches(model, scanned):
+    """One rigid transform for both scans: every scanned crown point lands exactly where that transform puts it."""
+    from scipy.spatial import cKDTree
+
+    move = np.asarray(scanned.info["scan_to_arch"])
+    assert np.allclose(move[:3, :3] @ move[:3, :3].T, np.eye(3), atol=1e-9)  # rigid: no scale, no mirror
+    assert np.linalg.det(move[:3, :3]) == pytest.approx(1.0)
+    for n in (11, 16, 23, 36, 41, 47):
+        scanned_points = scanned.teeth[n].world_mesh().vertices
+        crown = crown_at_cej(model.teeth[n]).vertices @ move[:3, :3].T + move[:3, 3]
+        gap, _ = cKDTree(scanned_points).query(crown)
+        assert gap.max() < 1e-6, n
+
+
+def test_an_estimated_root_puts_the_centre_of_resistance_near_the_parametric_one(model, scanned):
+    for n, truth in model.teeth.items():
+        est = scanned.teeth[n]
+        assert abs(est.root_length - truth.root_length) < 1.5
+        cr_true = truth.to_world(center_of_resistance(truth))
+        cr_est = est.to_world(center_of_resistance(est))
+        move = scanned.info["scan_to_arch"]
+        cr_true = np.asarray(move)[:3, :3] @ cr_true + np.asarray(move)[:3, 3]  # model frame -> refitted arch frame
+        assert np.linalg.norm(cr_est - cr_true) < 1.5, n
+
+
+def test_a_molar_crown_gets_as_many_roots_as_its_type(model):
+    crown = crown_at_cej(model.teeth[36])
+    rooted = synthesize_root(crown, 36, "36", labial=model.teeth[36].rest_pose[:3, 2])
+    assert rooted.roots == 2 and rooted.mesh.is_watertight
+    assert boundary_loops(rooted.mesh) == []
+    crown = crown_at_cej(model.teeth[16])
+    assert synthesize_root(crown, 16, "16", labial=model.teeth[16].rest_pose[:3, 2]).roots == 3
+
+
+def _edit_labels(path: Path, edit) -> None:
+    labels_path = path.with_suffix(".json")
+    data = json.loads(labels_path.read_text())
+    edit(data)
+    labels_path.write_text(json.dumps(data))
+
+
+def _spoiled_case(tmp_path, scans, edit) -> Path:
+    folder = tmp_path / "scans"
+    folder.mkdir()
+    for scan in scans:
+        for p in (scan, scan.with_suffix(".json")):
+            (folder / p.name).write_bytes(p.read_bytes())
+    _edit_labels(folder / scans[0].name, edit)
+    case = tmp_path / "case.toml"
+    case.write_text(f'[case]\nname = "spoiled"\n\n[model]\nkind = "labelled-scan"\nupper = "scans/{scans[0].name}"\n'
+                    f'lower = "scans/{scans[1].name}"\n\n[treatment]\nduration_days = 2\nstep_days = 1\n')
+    return case
+
+
+def _relabel(old: int, new: int):
+    def edit(data):
+        data["labels"] = [new if v == old else v for v in data["labels"]]
+    return edit
+
+
+def _few(data):
+    labels = data["labels"]
+    gum = [i for i, v in enumerate(labels) if v == 0][:40]
+    for i in gum:
+        labels[i] = 18
+
+
+BAD = {
+    "length": (lambda d: d["labels"].pop(), "labels: holds .* values for the .* vertices"),
+    "other jaw's FDI": (_relabel(11, 31), "labels: holds 31, not FDI numbers of the upper jaw"),
+    "too few vertices": (_few, "labels: tooth 18 has only 40 vertices"),
+    "several pieces": (_relabel(26, 16), "labels: tooth 16's crown is in 2 separate pieces"),
+    "other jaw": (lambda d: d.update(jaw="lower"), "jaw: is 'lower' but the file is given as the upper scan"),
+}
+
+
+@pytest.mark.parametrize("name", list(BAD))
+def test_a_bad_label_file_is_refused_in_one_line_naming_file_and_field_and_nothing_is_written(tmp_path, scans, name):
+    edit, message = BAD[name]
+    case = _spoiled_case(tmp_path, scans, edit)
+    out = tmp_path / "out"
+    result = orthosim("run", case, "--out", out, "--no-render")
+    assert result.returncode == 2, result.stderr
+    lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in result.stderr
+    assert "p1_upper.json" in lines[0] and "fix:" in lines[0]
+    import re
+
+    assert re.search(message, lines[0]), lines[0]
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_a_mesh_and_labels_that_disagree_are_refused_before_the_split(scans, tmp_path):
+    mesh = tmp_path / "x_upper.obj"
+    mesh.write_bytes(scans[0].read_bytes())
+    data = json.loads(scans[0].with_suffix(".json").read_text())
+    data["labels"] = data["labels"][:-3]
+    mesh.with_suffix(".json").write_text(json.dumps(data))
+    with pytest.raises(MeshError, match="labels: holds"):
+        read_labelled_scan(mesh, "upper")
+
+
+def test_each_label_becomes_one_crown_open_at_exactly_one_margin(scans):
+    scan = read_labelled_scan(scans[0], "upper")
+    crowns, gum = split_scan(scan)
+    assert set(crowns) == {11, 12, 13, 14, 15, 16, 17, 21, 22, 23, 24, 25, 26, 27}
+    assert all(len(boundary_loops(c)) == 1 for c in crowns.values())
