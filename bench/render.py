@@ -30,6 +30,8 @@ machine does not move the figure; the end-to-end records also give frames / tota
     process (the baseline), and loaded from the cache, in seconds (target: under 10 s to build);
   - startup_s: seconds from launching `orthosim run` to its first simulated step, warm caches
     (`orthosim_bench.startup`, target 2 s), beside a bare interpreter start in the same minute;
+  - labelled_scan: a labelled arch scan of 300k+ triangles (`orthosim_bench.scanarch`) made ready to
+    simulate (split, roots estimated, model and sphere trees) cold and warm, in seconds (targets 30 s / 2 s);
   - staging_s: planning time of `orthosim stage` on each shipped staging case and on a 28-tooth
     set-up of 30 stages (target: under 10 s; `orthosim_bench.staging`);
   - memory_mb: resident set size before and after a long (default 2,000 frames) update+render
@@ -276,7 +278,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
               png: bool = True, frames_per_step: int = 6, step_days: float | None = 2.0,
               tree_build: bool = True, startup: bool = True, staging: bool = True, batch: bool = False,
               report: bool = False, report_runs: str | Path | None = None, memory: bool = False,
-              run_case=None) -> dict:
+              run_case=None, scan: bool = False) -> dict:
     """Measure and return the bench record (see the module docstring and the output contract).
 
     `run_case(case_path, out_dir, detector, render_opts)` is the CLI's own run (the composition root
@@ -326,6 +328,9 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     from orthosim_bench.startup import startup_timings  # `orthosim run` launched to its first step, warm caches
 
     startup_record = startup_timings(case if case is not None else DEFAULT_CASE) if startup else None
+    from orthosim_bench.scanarch import labelled_scan_timings  # a 300k-triangle labelled arch scan, cold and warm
+
+    scan_record = labelled_scan_timings() if scan else None
     # First, before any GL context or thread exists: the model's sphere trees built from nothing
     # (a first run on a new machine), over every core and, as the baseline, in one process.
     trees = tree_build_timings(dentition) if tree_build else None
@@ -533,6 +538,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         "spheretree_build": trees,
         "startup_s": None if startup_record is None else startup_record["startup_s"],
         "startup": startup_record,
+        "labelled_scan": scan_record,
         "staging_s": None if staged is None else {**{k: v["staging_s"] for k, v in staged["cases"].items()},
                                                    "setup_28_teeth": staged["setup_28_teeth"]["staging_s"]},
         "staging": staged,

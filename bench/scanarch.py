@@ -76,3 +76,53 @@ def write_labelled_arch(dentition, jaw: str, folder: str | Path, stem: str = "sc
     (folder / f"{stem}_{jaw}.json").write_text(json.dumps({
         "id_patient": stem, "jaw": jaw, "labels": all_labels, "instances": [lookup[v] for v in all_labels]}))
     return path
+
+
+def labelled_scan_timings(faces_target: int = 300_000) -> dict:
+    """Seconds to make one labelled arch scan of at least `faces_target` triangles ready to simulate.
+
+    The upper arch of the smooth parametric model, its crowns subdivided until the scan has that
+    many triangles, is loaded as a `labelled-scan` model (split, roots estimated, placed, the
+    dentition cached) and its sphere trees built (`CollisionModel.from_dentition`), first with
+    empty caches (cold, in a fresh `$ORTHOSIM_CACHE`), then again from the caches (warm, same
+    process). Targets: 30 s cold, 2 s warm.
+    """
+    import os
+    import tempfile
+    import time
+
+    from orthosim.collision.model import CollisionModel
+    from orthosim.exchange.case import ModelSpec
+    from orthosim.model.dentition_cache import cached_dentition
+    from orthosim.model.parametric import parametric_dentition
+
+    model = parametric_dentition("smooth")
+    with tempfile.TemporaryDirectory() as tmp:
+        subdivisions, faces = 0, 0
+        while True:
+            path = write_labelled_arch(model, "upper", tmp, "bench", subdivisions=subdivisions)
+            faces = len(trimesh.load(path, force="mesh", process=False).faces)
+            if faces >= faces_target:
+                break
+            subdivisions += 1
+        spec = ModelSpec("labelled-scan", upper=path)
+        from orthosim.exchange.case import Case, Wire
+
+        case = Case(Path(tmp) / "bench.toml", "bench", "", spec, (), (), Wire(), 1.0, 1.0, "continuous")
+        parameters, inputs = case._mesh_model_key()
+        old = os.environ.get("ORTHOSIM_CACHE")
+        os.environ["ORTHOSIM_CACHE"] = str(Path(tmp) / "cache")
+        seconds = []
+        try:
+            for _ in range(2):
+                start = time.perf_counter()
+                dent = cached_dentition(parameters, case._load_meshes, inputs)
+                CollisionModel.from_dentition(dent)
+                seconds.append(time.perf_counter() - start)
+        finally:
+            if old is None:
+                os.environ.pop("ORTHOSIM_CACHE", None)
+            else:
+                os.environ["ORTHOSIM_CACHE"] = old
+    return {"faces": faces, "teeth": len(dent.teeth), "cold_s": seconds[0], "warm_s": seconds[1],
+            "target_cold_s": 30.0, "target_warm_s": 2.0}

@@ -213,6 +213,7 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--no-staging", is_flag=True, help="Skip timing the aligner staging planner (shipped staging cases, 28-tooth set-up).")
 @click.option("--no-batch", is_flag=True, help="Skip `orthosim batch` animations per minute with 1 and 2 workers (minutes).")
 @click.option("--no-report", is_flag=True, help="Skip timing `orthosim report` of the paper's three cases.")
+@click.option("--no-scan", is_flag=True, help="Skip a 300k-triangle labelled arch scan made ready to simulate, cold and warm.")
 @click.option("--no-memory", is_flag=True, help="Skip the peak memory of a 10,000-step run and a 2,000-frame render (minutes).")
 @click.option("--report-runs", type=click.Path(path_type=Path), default=Path("out/bench/report-runs"), show_default=True,
               help="Where the report's runs are made once and kept for later benches.")
@@ -220,7 +221,7 @@ def check(cases: tuple[Path, ...]) -> None:
               help="Simulation step for the bench, so the case's teeth keep moving through the measured frames.")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
           no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool,
-          no_staging: bool, no_batch: bool, no_report: bool, report_runs: Path, no_memory: bool) -> None:
+          no_staging: bool, no_batch: bool, no_report: bool, report_runs: Path, no_memory: bool, no_scan: bool) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -233,7 +234,7 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
                        step_days=step_days, tree_build=not no_tree_build, startup=not no_startup,
                        staging=not no_staging, batch=not no_batch, report=not no_report, report_runs=report_runs,
-                       memory=not no_memory, run_case=run_case)
+                       memory=not no_memory, run_case=run_case, scan=not no_scan)
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
