@@ -166,3 +166,45 @@ def test_each_label_becomes_one_crown_open_at_exactly_one_margin(scans):
     crowns, gum = split_scan(scan)
     assert set(crowns) == {11, 12, 13, 14, 15, 16, 17, 21, 22, 23, 24, 25, 26, 27}
     assert all(len(boundary_loops(c)) == 1 for c in crowns.values())
+
+
+def _capped(crown):
+    """The open crown closed flat across its margin (a crown exported as a solid, still without a root)."""
+    import trimesh
+
+    loop = boundary_loops(crown)[0]
+    centre = len(crown.vertices)
+    cap = np.column_stack([np.roll(loop, -1), loop, np.full(len(loop), centre)])
+    return trimesh.Trimesh(np.vstack([crown.vertices, crown.vertices[loop].mean(axis=0)]), np.vstack([crown.faces, cap]),
+                           process=False)
+
+
+@pytest.mark.parametrize("frame", ["arch", "scan"])
+def test_a_folder_of_crowns_loads_with_estimated_roots_beside_whole_teeth(model, tmp_path, frame):
+    from orthosim.exchange.meshfolder import load_mesh_folder
+    from orthosim.model.rootsynthesis import RootEstimatedWarning
+
+    whole = (12, 22)
+    for n in (13, 12, 11, 21, 22, 23, 16, 26):
+        mesh = model.teeth[n].world_mesh() if n in whole else crown_at_cej(model.teeth[n])
+        if n == 16 and frame == "arch":
+            mesh = _capped(mesh)  # closed, but no root: taken as a crown in the arch frame
+        mesh.export(tmp_path / f"tooth_{n}.stl")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        dent = load_mesh_folder(tmp_path, frame=frame)
+    estimated = {n for n, t in dent.teeth.items() if t.root_origin == "estimated"}
+    assert estimated == {13, 11, 21, 23, 16, 26}
+    announced = [str(w.message) for w in caught if issubclass(w.category, RootEstimatedWarning)]
+    assert len(announced) == 6 and all("estimated root" in m for m in announced)
+    for n in estimated:
+        assert dent.teeth[n].mesh.is_watertight
+        assert abs(dent.teeth[n].root_length - model.teeth[n].root_length) < 1.5
+
+
+def test_an_open_mesh_is_still_refused_where_crowns_are_not_asked_for(model, tmp_path):
+    from orthosim.exchange.meshload import load_tooth_mesh
+
+    crown_at_cej(model.teeth[11]).export(tmp_path / "tooth_11.stl")
+    with pytest.raises(MeshError, match="not watertight"):
+        load_tooth_mesh(tmp_path / "tooth_11.stl")

@@ -217,7 +217,7 @@ def load_labelled_scans(upper: str | Path | None, lower: str | Path | None,
         crowns.update(teeth)
         sources.update({n: f"{scan.path} (tooth {n})" for n in teeth})
     frames = {n: margin_frame(c, sources[n]) for n, c in crowns.items()}
-    labial = _labial_directions(frames)
+    labial = labial_directions(frames)
     meshes, axes = {}, {}
     for n, crown in crowns.items():
         rooted = synthesize_root(crown, n, sources[n], labial=labial[n], frame=frames[n])
@@ -247,7 +247,7 @@ def _axes(rooted, labial: np.ndarray):
     return ToothAxes(long_axis=rooted.long_axis, labial=labial, point=rooted.margin_centre)
 
 
-def _labial_directions(frames: dict) -> dict[int, np.ndarray]:
+def labial_directions(frames: dict) -> dict[int, np.ndarray]:
     """FDI -> labial direction in the scanner frame: across the arch tangent and the long axis, away from the arch's centre."""
     out = {}
     for arch in (Arch.UPPER, Arch.LOWER):

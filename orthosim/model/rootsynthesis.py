@@ -42,6 +42,10 @@ _TIP_START = 0.82  # fraction of the root length where the rounded tip starts
 _TRUNK_SCALE = 0.85  # trunk cross-section at the furcation over the cervical one (toothshape.TRUNK)
 
 
+class RootEstimatedWarning(UserWarning):
+    """A crown-only tooth mesh was given an estimated root; the message names the file."""
+
+
 @dataclass(frozen=True)
 class MarginFrame:
     """Where a crown's root is hung from, in the crown's own frame (mm)."""
@@ -164,6 +168,8 @@ def synthesize_root(crown: trimesh.Trimesh, fdi: int, where: str, labial: np.nda
     if recipe_roots:
         mesh = _join_roots(mesh, fdi, local[frame.loop], recipe_roots, trunk * scale, root_length, where)
     mesh.apply_transform(_to_input(basis, frame.centre))
+    if mesh.is_watertight and mesh.volume < 0:
+        mesh.invert()  # the crown was wound inward: the root followed it
     if not mesh.is_watertight or mesh.volume <= 0:
         raise MeshError(where, "root", "the crown and its estimated root do not close into one solid",
                         "repair the crown mesh (one clean margin, consistent winding) and load it again")
@@ -268,6 +274,8 @@ def _join_roots(trunk_mesh: trimesh.Trimesh, fdi: int, margin: np.ndarray, roots
             f = f[:, ::-1]
         v[:, 1] += level
         parts.append(trimesh.Trimesh(v, f, process=False))
+    if trunk_mesh.volume < 0:
+        trunk_mesh.invert()  # an inward-wound crown: the union needs the solid the right way out
     try:
         joined = trimesh.boolean.union([trunk_mesh, *parts], engine="manifold")
     except Exception as err:  # manifold3d refuses a non-manifold input in several ways; all mean the same here
