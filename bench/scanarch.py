@@ -51,12 +51,15 @@ def _collar(crown: trimesh.Trimesh, tooth) -> tuple[np.ndarray, np.ndarray, np.n
 
 
 def write_labelled_arch(dentition, jaw: str, folder: str | Path, stem: str = "scan", subdivisions: int = 0,
-                        suffix: str = ".obj") -> Path:
-    """Write `<stem>_<jaw><suffix>` and `<stem>_<jaw>.json` for one arch of `dentition`; returns the mesh path."""
+                        suffix: str = ".obj", teeth: set[int] | None = None) -> Path:
+    """Write `<stem>_<jaw><suffix>` and `<stem>_<jaw>.json` for one arch of `dentition` (only `teeth`
+    when given); returns the mesh path."""
     arch = fdi_mod.Arch.UPPER if jaw == "upper" else fdi_mod.Arch.LOWER
     vertices, faces, labels = [], [], []
     count = 0
     for n in dentition.arch(arch):
+        if teeth is not None and n not in teeth:
+            continue
         tooth = dentition.teeth[n]
         crown = crown_at_cej(tooth)
         for _ in range(subdivisions):

@@ -208,3 +208,26 @@ def test_an_open_mesh_is_still_refused_where_crowns_are_not_asked_for(model, tmp
     crown_at_cej(model.teeth[11]).export(tmp_path / "tooth_11.stl")
     with pytest.raises(MeshError, match="not watertight"):
         load_tooth_mesh(tmp_path / "tooth_11.stl")
+
+
+def test_a_run_on_labelled_scans_marks_every_root_estimated_and_exports_the_gum(tmp_path):
+    """`orthosim run` end to end on a small two-arch scan (front teeth, coarse): metrics and scene."""
+    from orthosim.model.parametric import parametric_dentition
+
+    front = {13, 12, 11, 21, 22, 23, 43, 42, 41, 31, 32, 33}
+    coarse = parametric_dentition("coarse")
+    upper = write_labelled_arch(coarse, "upper", tmp_path, "front", subdivisions=1, teeth=front)
+    lower = write_labelled_arch(coarse, "lower", tmp_path, "front", subdivisions=1, teeth=front)
+    case = tmp_path / "case.toml"
+    case.write_text(f'[case]\nname = "front"\n\n[model]\nkind = "labelled-scan"\nupper = "{upper.name}"\n'
+                    f'lower = "{lower.name}"\n\n[treatment]\nduration_days = 4\nstep_days = 2\n\n'
+                    '[[loads]]\nteeth = [13]\nforce_cN = 100\ndirection = "distal"\n')
+    out = tmp_path / "out"
+    result = orthosim("run", case, "--out", out, "--no-render", "--export-scene", "glb", "-q")
+    assert result.returncode == 0, result.stderr
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert {n: t["root"] for n, t in metrics["teeth"].items()} == {str(n): "estimated" for n in front}
+    import trimesh
+
+    scene = trimesh.load(next((out / "scene").glob("*.glb")))
+    assert {"gingiva_upper", "gingiva_lower"} <= set(scene.graph.nodes)

@@ -25,6 +25,10 @@ from orthosim.model.dentition import Dentition
 from orthosim.model.fdi import Arch
 
 
+# A closed mesh counts as a crown only while no extent exceeds this times its type's largest crown dimension.
+CROWN_SIZE_FACTOR = 1.4
+
+
 def load_mesh_folder(
     folder: str | Path,
     mapping: dict[str, int] | None = None,
@@ -150,10 +154,12 @@ def _labial_in_arch(n: int, centre: np.ndarray, meshes: dict) -> np.ndarray:
 
 
 def _rootless(n: int, mesh, occlusal: np.ndarray) -> bool:
-    """Whether a closed mesh in the arch frame is a crown only: it reaches less than a quarter root below the CEJ."""
+    """Whether a closed mesh in the arch frame is a crown only: it reaches less than a quarter root below the
+    CEJ, and no way across is it longer than a crown (a whole tooth lying on its side is no crown)."""
     dims = dimensions(n)
     along = mesh.vertices @ occlusal
-    return float(along.max() - along.min()) < dims.crown_height + 0.25 * dims.root_length
+    short = float(along.max() - along.min()) < dims.crown_height + 0.25 * dims.root_length
+    return short and float(mesh.extents.max()) < CROWN_SIZE_FACTOR * max(dims.md_width, dims.bl_width, dims.crown_height)
 
 
 def _mark_estimated(teeth: dict, crowns) -> dict:
