@@ -438,11 +438,11 @@ def _render_steps(dent, records, out_dir: Path, options: RunOptions, *, extracte
     """Draw every simulated step (`per_step` frames each) into out_dir: frames, animation, split views,
     with the overlay (case, detector, day N of M, legend, FDI labels on request) unless --no-overlay."""
     from orthosim_render.animation import render_run
-    from orthosim_render.overlay import FrameCaption
+    from orthosim_render.overlay import FrameCaption, model_legend
     from orthosim_render.timeline import frames_from_steps
 
-    caption = FrameCaption(case.name, options.detector, case.step_days, case.duration_days,
-                           labels=options.labels) if options.overlay else None
+    caption = FrameCaption(case.name, options.detector, case.step_days, case.duration_days, labels=options.labels,
+                           extra_legend=model_legend(dent, options.hide_roots)) if options.overlay else None
     frames = frames_from_steps(records, extracted, per_step)
     return render_run(dent, frames, out_dir, views=options.views, size=options.size, gif=options.gif, alpha=options.alpha,
                       hide_roots=options.hide_roots, color_contact_faces=options.contact_faces, fps=options.fps,

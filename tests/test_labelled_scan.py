@@ -231,3 +231,34 @@ def test_a_run_on_labelled_scans_marks_every_root_estimated_and_exports_the_gum(
 
     scene = trimesh.load(next((out / "scene").glob("*.glb")))
     assert {"gingiva_upper", "gingiva_lower"} <= set(scene.graph.nodes)
+
+
+@pytest.mark.parametrize("model_lines,message", [
+    ('kind = "labelled-scan"\n', "model.upper: no scan given"),
+    ('kind = "labelled-scan"\nupper = "nowhere_upper.obj"\n', "model.upper: no such scan file"),
+    ('kind = "labelled-scan"\nupper = "p1_upper.obj"\nfolder = "x"\n', "model.folder: not used by labelled scans"),
+    ('kind = "meshes"\nfolder = "."\nupper = "p1_upper.obj"\n', "model.upper: applies only to kind"),
+])
+def test_a_labelled_scan_model_section_is_checked_field_by_field(tmp_path, scans, model_lines, message):
+    from orthosim.errors import CaseError
+    from orthosim.exchange.case import load_case
+
+    for p in (scans[0], scans[0].with_suffix(".json")):
+        (tmp_path / p.name).write_bytes(p.read_bytes())
+    case = tmp_path / "case.toml"
+    case.write_text(f"[model]\n{model_lines}\n[treatment]\nduration_days = 2\n")
+    with pytest.raises(CaseError, match=message):
+        load_case(case)
+
+
+def test_a_labelled_scan_case_names_the_labelled_teeth_without_loading_the_meshes(tmp_path, scans):
+    from orthosim.exchange.case import load_case
+
+    for p in (*scans, *(s.with_suffix(".json") for s in scans)):
+        (tmp_path / p.name).write_bytes(p.read_bytes())
+    case = tmp_path / "case.toml"
+    case.write_text('[model]\nkind = "labelled-scan"\nupper = "p1_upper.obj"\nlower = "p1_lower.obj"\n\n'
+                    '[treatment]\nextractions = [14, 34]\nduration_days = 2\n')
+    loaded = load_case(case)
+    assert loaded.model.present_teeth() == {10 * q + p for q in (1, 2, 3, 4) for p in range(1, 8)}
+    assert loaded.extractions == (14, 34)

@@ -337,10 +337,7 @@ def _read_model(path: Path, r: FieldReader) -> ModelSpec:
             if not any(f.glob("tooth_*.stl")):
                 r.fail(f"folder[{i}]" if many else "folder", f"no tooth_N.stl files in {f}",
                        "point it at an Open-Full-Jaw maxilla or mandible folder, or the patient folder holding both")
-    budget = r.get("max_triangles_per_tooth")
-    if budget is not None and (isinstance(budget, bool) or not isinstance(budget, int) or budget < MIN_TRIANGLES_PER_TOOTH):
-        r.fail("max_triangles_per_tooth", f"must be a whole number of at least {MIN_TRIANGLES_PER_TOOTH:,}, got {budget!r}",
-               "write e.g. 100000 (the default), or leave it out")
+    budget = _triangle_budget(r)
     return ModelSpec(kind, diastema_mm=diastema, folder=folder, files=files, scale=r.number("scale", 1.0, positive=True),
                      folders=tuple(folders) if kind == "open-full-jaw" else (), frame=frame,
                      max_triangles_per_tooth=budget)
