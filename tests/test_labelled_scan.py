@@ -262,3 +262,13 @@ def test_a_labelled_scan_case_names_the_labelled_teeth_without_loading_the_meshe
     loaded = load_case(case)
     assert loaded.model.present_teeth() == {10 * q + p for q in (1, 2, 3, 4) for p in range(1, 8)}
     assert loaded.extractions == (14, 34)
+
+
+def test_a_crown_with_a_scan_hole_still_closes_into_one_solid(model):
+    crown = crown_at_cej(model.teeth[21])
+    top = int(np.argmax(crown.vertices @ model.teeth[21].rest_pose[:3, 1]))
+    crown.update_faces(~np.isin(crown.faces, [top]).any(axis=1))  # a hole at the incisal edge
+    crown.remove_unreferenced_vertices()
+    assert len(boundary_loops(crown)) == 2
+    rooted = synthesize_root(crown, 21, "21", labial=model.teeth[21].rest_pose[:3, 2])
+    assert rooted.mesh.is_watertight and rooted.mesh.volume > 0

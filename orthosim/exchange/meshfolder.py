@@ -85,9 +85,8 @@ def load_mesh_folder(
                 "frame": "one scan frame, mapped into the arch frame by one rigid transform", "scan_to_arch": T,
                 "origin_rule": ORIGIN_RULE, "axes_estimated": sorted(teeth), "cej_rule": CEJ_RULE}
         return report_rest_interpenetration(Dentition(teeth, description or f"scanned meshes from {folder}", info), folder)
-    axes = dict(axes or {})
-    given = set(axes)
-    axes = {**crown_axes, **axes}
+    given = set(axes or {})
+    axes = {**crown_axes, **(axes or {})}
     for arch in (Arch.UPPER, Arch.LOWER):
         members = [n for n in meshes if fdi_mod.arch_of(n) is arch]
         # The arch centroid is a good inside point once the arch has a few teeth; with fewer the
@@ -138,16 +137,17 @@ def _root_crowns(meshes: dict, files: dict[int, Path], frame: str) -> dict[int, 
         rooted = synthesize_root(crown, n, str(files[n]), labial=labial[n], frame=margin)
         meshes[n] = rooted.mesh
         axes[n] = ToothAxes(long_axis=rooted.long_axis, labial=labial[n], point=rooted.margin_centre)
+        roots = f"{rooted.roots} root{'s' if rooted.roots > 1 else ''}"
         warnings.warn(f"{files[n]}: a crown without a root; an estimated root of {rooted.root_length_mm:.1f} mm "
-                      f"({rooted.roots} root{'s' if rooted.roots > 1 else ''}) was built for it (not the patient's root)",
-                      RootEstimatedWarning, stacklevel=3)
+                      f"({roots}) was built for it (not the patient's root)", RootEstimatedWarning, stacklevel=3)
     return axes
 
 
 def _labial_in_arch(n: int, centre: np.ndarray, meshes: dict) -> np.ndarray:
     """Labial direction of a crown in the arch frame: horizontal, from its arch's centre (as `estimate_axes`)."""
     members = [m for m in meshes if fdi_mod.arch_of(m) is fdi_mod.arch_of(n)]
-    arch_centre = np.mean([meshes[m].vertices.mean(axis=0) for m in members], axis=0) if len(members) >= 3 else np.zeros(3)
+    arch_centre = (np.mean([meshes[m].vertices.mean(axis=0) for m in members], axis=0) if len(members) >= 3
+                   else np.zeros(3))
     labial = centre - arch_centre
     labial[1] = 0.0
     return labial
@@ -159,7 +159,8 @@ def _rootless(n: int, mesh, occlusal: np.ndarray) -> bool:
     dims = dimensions(n)
     along = mesh.vertices @ occlusal
     short = float(along.max() - along.min()) < dims.crown_height + 0.25 * dims.root_length
-    return short and float(mesh.extents.max()) < CROWN_SIZE_FACTOR * max(dims.md_width, dims.bl_width, dims.crown_height)
+    largest = max(dims.md_width, dims.bl_width, dims.crown_height)
+    return short and float(mesh.extents.max()) < CROWN_SIZE_FACTOR * largest
 
 
 def _mark_estimated(teeth: dict, crowns) -> dict:

@@ -54,6 +54,7 @@ class MarginFrame:
     centre: np.ndarray  # (3,) mm, centroid of the margin loop
     loop: np.ndarray  # (m,) int, the margin's vertex indices in the crown mesh, in boundary order
     crown_height_mm: float  # highest crown point above the mean margin level, along the long axis
+    holes: tuple = ()  # the crown's other open loops (scan holes), each (k,) int, closed before the root is built
 
 
 @dataclass(frozen=True)
@@ -142,7 +143,8 @@ def margin_frame(crown: trimesh.Trimesh, where: str, occlusal: np.ndarray | None
     if height <= 1.0:
         raise MeshError(where, "crown", f"the crown stands only {height:.2f} mm above its margin",
                         "pass a whole crown, open only at the gum line")
-    return MarginFrame(axis, centre, loop, height)
+    others = tuple(lp for lp in loops if lp is not loop)
+    return MarginFrame(axis, centre, loop, height, others)
 
 
 def synthesize_root(crown: trimesh.Trimesh, fdi: int, where: str, labial: np.ndarray | None = None,
@@ -160,10 +162,11 @@ def synthesize_root(crown: trimesh.Trimesh, fdi: int, where: str, labial: np.nda
     root_length = float(np.clip(frame.crown_height_mm * ratio, low * dims.root_length, high * dims.root_length))
     basis = _local_basis(frame.long_axis, labial)  # rows x, y, z
     local = (crown.vertices - frame.centre) @ basis.T
+    local, faces = _close_holes(local, np.asarray(crown.faces, np.int64), frame.holes)
     recipe_roots, trunk = _root_recipe(fdi)
     scale = root_length / dims.root_length
     depth = root_length if not recipe_roots else (trunk * scale + 1.5)
-    verts, faces = _loft_root(local, crown.faces, frame.loop, depth, single=not recipe_roots)
+    verts, faces = _loft_root(local, faces, frame.loop, depth, single=not recipe_roots)
     mesh = trimesh.Trimesh(verts, faces, process=False)
     if recipe_roots:
         mesh = _join_roots(mesh, fdi, local[frame.loop], recipe_roots, trunk * scale, root_length, where)
@@ -174,6 +177,19 @@ def synthesize_root(crown: trimesh.Trimesh, fdi: int, where: str, labial: np.nda
         raise MeshError(where, "root", "the crown and its estimated root do not close into one solid",
                         "repair the crown mesh (one clean margin, consistent winding) and load it again")
     return RootedCrown(mesh, frame.long_axis, frame.centre, frame.crown_height_mm, root_length, max(1, len(recipe_roots)))
+
+
+def _close_holes(vertices: np.ndarray, faces: np.ndarray, holes) -> tuple[np.ndarray, np.ndarray]:
+    """Each hole (a boundary loop, run as its faces run it) closed by a fan from its centroid; margin indices kept."""
+    if not holes:
+        return vertices, faces
+    extra_v, extra_f = [], []
+    count = len(vertices)
+    for loop in holes:
+        extra_v.append(vertices[loop].mean(axis=0))
+        extra_f.append(np.column_stack([np.roll(loop, -1), loop, np.full(len(loop), count)]))
+        count += 1
+    return np.vstack([vertices, extra_v]), np.vstack([faces, *extra_f])
 
 
 def _local_basis(axis: np.ndarray, labial: np.ndarray | None) -> np.ndarray:
