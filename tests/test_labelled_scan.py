@@ -227,6 +227,10 @@ def test_a_run_on_labelled_scans_marks_every_root_estimated_and_exports_the_gum(
     assert result.returncode == 0, result.stderr
     metrics = json.loads((out / "metrics.json").read_text())
     assert {n: t["root"] for n, t in metrics["teeth"].items()} == {str(n): "estimated" for n in front}
+    import jsonschema
+    from importlib import resources
+
+    jsonschema.validate(metrics, json.loads(resources.files("orthosim").joinpath("schema/metrics.schema.json").read_text()))
     import trimesh
 
     scene = trimesh.load(next((out / "scene").glob("*.glb")))

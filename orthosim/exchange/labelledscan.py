@@ -233,7 +233,8 @@ def load_labelled_scans(upper: str | Path | None, lower: str | Path | None,
     placed, T = place_scan(where, meshes, axes, sources)
     teeth = {n: replace(t, root_origin="estimated") for n, t in placed.items()}
     gingiva = {jaw: gum.copy().apply_transform(T) for jaw, gum in gums.items()}
-    info = {"source": [str(s.path) for s in scans], "labels": [str(s.labels_path) for s in scans],
+    # "files" (not "labels"): run.json keeps machine paths, metrics.json does not (orthosim.runtime.run)
+    info = {"kind": "labelled-scan", "source": [str(s.path) for s in scans], "files": [str(s.labels_path) for s in scans],
             "frame": "one scanner frame, mapped into the arch frame by one rigid transform", "scan_to_arch": T,
             "origin_rule": ORIGIN_RULE, "roots": "estimated for every tooth (orthosim.model.rootsynthesis)",
             "axes_estimated": sorted(teeth)}
