@@ -74,8 +74,12 @@ def write_labelled_arch(dentition, jaw: str, folder: str | Path, stem: str = "sc
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{stem}_{jaw}{suffix}"
-    trimesh.Trimesh(np.vstack(vertices), np.vstack(faces), process=False).export(path)
-    all_labels = np.concatenate(labels).tolist()
+    all_faces = np.vstack(faces)
+    trimesh.Trimesh(np.vstack(vertices), all_faces, process=False).export(path)
+    all_labels = np.concatenate(labels)
+    if suffix.lower() == ".stl":  # an STL is a triangle soup: its vertices are the triangles' corners, in order
+        all_labels = all_labels[all_faces].ravel()
+    all_labels = all_labels.tolist()
     instances = [0 if v == 0 else i + 1 for i, v in enumerate(sorted(set(all_labels)))]
     lookup = dict(zip(sorted(set(all_labels)), instances))
     (folder / f"{stem}_{jaw}.json").write_text(json.dumps({

@@ -276,3 +276,18 @@ def test_a_crown_with_a_scan_hole_still_closes_into_one_solid(model):
     assert len(boundary_loops(crown)) == 2
     rooted = synthesize_root(crown, 21, "21", labial=model.teeth[21].rest_pose[:3, 2])
     assert rooted.mesh.is_watertight and rooted.mesh.volume > 0
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".stl"])
+def test_ply_and_stl_scans_load_like_obj(tmp_path, suffix):
+    """PLY keeps shared vertices like OBJ; an STL lists every triangle's corners, and its labels follow them."""
+    from orthosim.model.parametric import parametric_dentition
+
+    coarse = parametric_dentition("coarse")
+    front = {13, 12, 11, 21, 22, 23}
+    path = write_labelled_arch(coarse, "upper", tmp_path, "f", subdivisions=1, suffix=suffix, teeth=front)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        dent = load_labelled_scans(path, None)
+    assert set(dent.teeth) == front and set(dent.gingiva) == {"upper"}
+    assert all(t.mesh.is_watertight and t.root_origin == "estimated" for t in dent.teeth.values())

@@ -3,7 +3,7 @@
 An intraoral scan is one mesh per arch (OBJ, STL or PLY, mm), crowns and gum in one surface, open
 at its edge. A segmentation tool writes a JSON beside it (`X_upper.obj` -> `X_upper.json`) holding
 `id_patient`, `jaw` ("upper" or "lower"), `labels` (one per vertex, in the order the mesh file lists
-its vertices: the FDI number of the tooth it belongs to, 0 for gum) and optionally `instances` (one
+its vertices, an STL's being its triangles' corners: the FDI number of the tooth it belongs to, 0 for gum) and optionally `instances` (one
 per vertex too). Each tooth label's triangles (those whose three vertices carry it) become one open
 crown, given an estimated root (`orthosim.model.rootsynthesis`); every other triangle is the gum,
 kept as its own mesh (`Dentition.gingiva`) that is drawn and exported but never enters the
@@ -119,6 +119,7 @@ def split_scan(scan: LabelledScan) -> tuple[dict[int, trimesh.Trimesh], trimesh.
                             f"crown (at least {MIN_TOOTH_VERTICES})", "label them 0 (gum) or re-run the segmentation")
         crowns[n] = _one_piece(_submesh(scan.mesh, faces[owner == n]), scan, n)
     gum = _submesh(scan.mesh, faces[owner == 0])
+    gum.merge_vertices()  # an STL's triangle soup, joined so the gum shades smoothly
     return crowns, gum
 
 
