@@ -60,6 +60,31 @@ def perturbed_poses(poses: Mapping[int, np.ndarray], step_mm: float = 0.1, step_
     return out
 
 
+class _FclStep:
+    """python-fcl over the same pairs as the detectors: both prebuilt BVH objects placed, then
+    `fcl.collide`, per pair; calling it returns how many pairs intersect."""
+
+    def __init__(self, model: CollisionModel, pair_idx, poses, poses_end):
+        queries = ExactQueries(model)
+
+        def objects(poses_):
+            P = model.pose_array(poses_)
+            return [(queries.object(a), queries.object(b), P[a], P[b]) for a, b in pair_idx]
+
+        self.at_end, self.at_start = objects(poses_end), objects(poses)
+
+    def __call__(self, all_contacts: bool, objs=None) -> int:
+        req = fcl.CollisionRequest(num_max_contacts=10**7, enable_contact=True) if all_contacts else fcl.CollisionRequest()
+        hits = 0
+        for oa, ob, Ta, Tb in (self.at_end if objs is None else objs):
+            meshquery.set_pose(oa, Ta)
+            meshquery.set_pose(ob, Tb)
+            res = fcl.CollisionResult()
+            fcl.collide(oa, ob, req, res)
+            hits += res.is_collision
+        return hits
+
+
 def collision_timings(dentition, poses: Mapping[int, np.ndarray] | None = None, pairs: Sequence[tuple[int, int]] | None = None,
                       repeats: int = 50, model: CollisionModel | None = None, tree_builder=None,
                       poses_end: Mapping[int, np.ndarray] | None = None) -> dict:
@@ -81,25 +106,8 @@ def collision_timings(dentition, poses: Mapping[int, np.ndarray] | None = None, 
     all_pairs = CollisionRequest(all_leaf_pairs=True)
     pair_idx = model.pair_indices(pairs)
 
-    queries = ExactQueries(model)
-
-    def fcl_objects(poses_):
-        P = model.pose_array(poses_)
-        return [(queries.object(a), queries.object(b), P[a], P[b]) for a, b in pair_idx]
-
-    at_end, at_start = fcl_objects(poses_end), fcl_objects(poses)
-
-    def fcl_step(all_contacts: bool, objs=at_end):
-        req = fcl.CollisionRequest(num_max_contacts=10**7, enable_contact=True) if all_contacts else fcl.CollisionRequest()
-        hits = 0
-        for oa, ob, Ta, Tb in objs:
-            meshquery.set_pose(oa, Ta)
-            meshquery.set_pose(ob, Tb)
-            res = fcl.CollisionResult()
-            fcl.collide(oa, ob, req, res)
-            hits += res.is_collision
-        return hits
-
+    fcl_step = _FclStep(model, pair_idx, poses, poses_end)
+    at_start = fcl_step.at_start
     samples = round_robin_us({
         "circles": lambda: detect_step(model, poses_end, pairs=pairs, detector="circles"),
         "discrete": lambda: detect_step(model, poses_end, pairs=pairs, detector="discrete", request=all_pairs),

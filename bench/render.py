@@ -33,11 +33,14 @@ machine does not move the figure; the end-to-end records also give frames / tota
   - labelled_scan: a labelled arch scan of 300k+ triangles (`orthosim_bench.scanarch`) made ready to
     simulate (split, roots estimated, model and sphere trees) cold and warm, in seconds (targets 30 s / 2 s);
   - staging_s: planning time of `orthosim stage` on each shipped staging case and on a 28-tooth
-    set-up of 30 stages (target: under 10 s; `orthosim_bench.staging`);
+    set-up of 30 stages (target: under 10 s; `orthosim_bench.staging`), and `orthosim stage verify`
+    of that set-up written to disk (target: under 60 s, the whole command);
   - memory_mb: resident set size before and after a long (default 2,000 frames) update+render
     run: leaked GL programs or buffers would show there;
   - memory: peak MB of `orthosim run` for 10,000 steps without rendering and drawn into 2,000
-    frames, each in a fresh child process (`orthosim_bench.memory`, target under 500 MB each).
+    frames, each in a fresh child process (`orthosim_bench.memory`, target under 500 MB each);
+  - label_pass (`--labels`): the label pass of semantic goldens against a golden's own render time
+    (`orthosim_bench.labels`, target at most a fifth).
 Components that are missing are reported as null with a "pending" note, never estimated.
 """
 
@@ -47,6 +50,7 @@ import os
 import platform
 import statistics
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -272,17 +276,73 @@ def _overlay_figures(end_to_end, in_child_process, simulate_case, case_obj, dete
     return out
 
 
-def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool = True, detector: str = "continuous",
-              frames: int = 300, warmup: int = 30, size=(640, 480), n_markers: int = 2000, memory_frames: int = 2000,
-              variant_rounds: int = 4, collision_repeats: int = 20, work_dir: str | Path | None = None,
-              png: bool = True, frames_per_step: int = 6, step_days: float | None = 2.0,
-              tree_build: bool = True, startup: bool = True, staging: bool = True, batch: bool = False,
-              report: bool = False, report_runs: str | Path | None = None, memory: bool = False,
-              run_case=None, scan: bool = False) -> dict:
+@dataclass(frozen=True)
+class BenchPlan:
+    """What one `orthosim bench` run measures (see `run_bench`). Units: frames, pixels, days."""
+
+    case: str | Path | None = None  # the case simulated and drawn (None: the paper's case 1)
+    dentition: object = None  # a bare model instead of a case: nothing simulated
+    simulate: bool = True
+    detector: str = "continuous"
+    frames: int = 300  # measured frames per figure, after `warmup`
+    warmup: int = 30
+    size: tuple[int, int] = (640, 480)
+    n_markers: int = 2000  # contact markers of the synthetic motion
+    memory_frames: int = 2000  # frames of the in-process memory run
+    variant_rounds: int = 4
+    collision_repeats: int = 20
+    work_dir: str | Path | None = None
+    png: bool = True
+    frames_per_step: int = 6
+    step_days: float | None = 2.0  # replaces the case's step (None keeps it)
+    tree_build: bool = True
+    startup: bool = True
+    staging: bool = True
+    batch: bool = False
+    report: bool = False
+    report_runs: str | Path | None = None
+    memory: bool = False
+    labels: bool = False
+    scan: bool = False  # a 300k-triangle labelled arch scan made ready to simulate, cold and warm
+
+    @property
+    def case_path(self) -> Path:
+        return Path(self.case) if self.case is not None else DEFAULT_CASE
+
+    @property
+    def n_states(self) -> int:
+        return self.warmup + self.frames
+
+
+@dataclass(frozen=True)
+class _BenchModel:
+    """The model the bench draws: the case's (with its step replaced) or a given dentition."""
+
+    dentition: object
+    case: object = None  # orthosim.exchange.case.Case, or None for a bare dentition
+    extracted: frozenset = frozenset()
+    name: str = ""
+
+    @classmethod
+    def load(cls, plan: BenchPlan) -> "_BenchModel":
+        if plan.dentition is not None:
+            return cls(plan.dentition, name=plan.dentition.description or "given dentition")
+        import dataclasses
+
+        from orthosim.exchange.case import load_case
+
+        case = load_case(plan.case_path)
+        if plan.step_days is not None:
+            case = dataclasses.replace(case, step_days=float(plan.step_days))
+        return cls(case.build_dentition(), case, frozenset(case.extractions), f"{case.name} ({plan.case_path.name})")
+
+
+def run_bench(case: str | Path | None = None, *, run_case=None, **options) -> dict:
     """Measure and return the bench record (see the module docstring and the output contract).
 
-    `run_case(case_path, out_dir, detector, render_opts)` is the CLI's own run (the composition root
-    passes it in): the batch figure times what `orthosim run` does, and the bench imports no CLI.
+    `options` are `BenchPlan`'s fields. `run_case(case_path, out_dir, detector, render_opts)` is the
+    CLI's own run (the composition root passes it in): the batch figure times what `orthosim run`
+    does, and the bench imports no CLI.
 
     The model is `dentition` when given (then nothing is simulated), else the case's (default:
     cases/case1_first_premolar_extraction.toml). With `simulate`, the case runs through
@@ -296,270 +356,296 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     sphere trees are also built from nothing (`orthosim_bench.spheretree`, target 10 s). With
     `batch`, animations per minute of `orthosim batch` with 1 and 2 workers (`orthosim_bench.batch`).
     With `report`, `orthosim report` of the paper's three cases x three detectors is timed from runs in
-    `report_runs` (made there first when missing; `orthosim_bench.report`, target 30 s).
+    `report_runs` (made there first when missing; `orthosim_bench.report`, target 30 s). With
+    `labels`, the label pass of semantic goldens against a golden's render (`orthosim_bench.labels`,
+    target at most a fifth).
     """
-    import tempfile
-
-    from orthosim.runtime.background import in_child_process
-
-    from orthosim_render.animation import render_run
     from orthosim_render.renderer import Renderer
     from orthosim_render.scene import DentitionScene
 
-    t_start = time.perf_counter()
-    load_start = os.getloadavg()
-    case_obj = None
-    extracted: frozenset[int] = frozenset()
-    if dentition is not None:
-        model_name = dentition.description or "given dentition"
+    plan = BenchPlan(case=case, **options)
+    t_start, load_start = time.perf_counter(), os.getloadavg()
+    model = _BenchModel.load(plan)
+    before = _before_gl(plan, model, run_case)
+    synthetic = SyntheticMotion(model.dentition, n_markers=plan.n_markers)
+    states = [synthetic(i) for i in range(plan.n_states)]  # render alone: the same states for every variant
+    mem_start = rss_mb()
+    renderer = Renderer(plan.size)
+    scene = DentitionScene(model.dentition, plan.size)
+    gl = {"gl_renderer": renderer.gl_renderer, "gl_version": renderer.gl_version}
+    render_times = _render_alone(renderer, scene, states, plan.warmup)
+    encode = ["MP4 encode (libx264 ultrafast)"] + (["PNG frames (orthosim_render.png)"] if plan.png else [])
+    e2e_synthetic = _end_to_end(plan, model.dentition, (synthetic(i) for i in range(plan.n_states)))
+    e2e_synthetic["includes"] = ["synthetic state (SyntheticMotion)", "scene update", "draw", "colour read-back", *encode]
+    simulated, pending = {}, {}
+    if model.case is not None and plan.simulate:
+        simulated = _simulated_figures(plan, model, encode)
     else:
-        from orthosim.exchange.case import load_case
+        pending["simulation"] = ("no case given (a bare dentition): end_to_end uses SyntheticMotion" if model.case is None
+                                 else "switched off (--no-simulate): end_to_end uses SyntheticMotion")
+    memory_mb = _memory_over_long_run(plan, renderer, scene, synthetic, mem_start)
+    renderer.close()
+    variants = _render_variants(model.dentition, states, plan.size, frames_per_round=max(10, plan.frames // 10),
+                                rounds=plan.variant_rounds)
+    record = _record(plan, model, before, gl, _median_fps(render_times), e2e_synthetic, simulated, pending, memory_mb,
+                     variants, load_start)
+    _optional_studies(plan, record)
+    record["wall_s"] = time.perf_counter() - t_start
+    return record
 
-        case_path = Path(case) if case is not None else DEFAULT_CASE
-        case_obj = load_case(case_path)
-        if step_days is not None:
-            import dataclasses
 
-            case_obj = dataclasses.replace(case_obj, step_days=float(step_days))
-        dentition = case_obj.build_dentition()
-        extracted = frozenset(case_obj.extractions)
-        model_name = f"{case_obj.name} ({case_path.name})"
-    n_tri = {f: len(dentition.teeth[f].mesh.faces) for f in dentition.fdis}
-    from orthosim_bench.startup import startup_timings  # `orthosim run` launched to its first step, warm caches
+def _before_gl(plan: BenchPlan, model: _BenchModel, run_case) -> dict:
+    """The figures taken before this process holds a GL context or threads: `orthosim run` launched
+    to its first step, the model's sphere trees built from nothing (over every core and, as the
+    baseline, in one process), staging, and batch throughput (its workers get the cores)."""
+    out: dict = {"startup": None, "trees": None, "staged": None, "batch": None, "scan": None}
+    if plan.startup:
+        from orthosim_bench.startup import startup_timings  # warm caches
 
-    startup_record = startup_timings(case if case is not None else DEFAULT_CASE) if startup else None
-    from orthosim_bench.scanarch import labelled_scan_timings  # a 300k-triangle labelled arch scan, cold and warm
+        out["startup"] = startup_timings(plan.case_path)
+    if plan.scan:
+        from orthosim_bench.scanarch import labelled_scan_timings
 
-    scan_record = labelled_scan_timings() if scan else None
-    # First, before any GL context or thread exists: the model's sphere trees built from nothing
-    # (a first run on a new machine), over every core and, as the baseline, in one process.
-    trees = tree_build_timings(dentition) if tree_build else None
-    staged = None
-    if staging:  # aligner staging planning time
+        out["scan"] = labelled_scan_timings()
+    if plan.tree_build:
+        out["trees"] = tree_build_timings(model.dentition)
+    if plan.staging:
         from orthosim_bench.staging import staging_timings
 
-        staged = staging_timings()
-    if batch:  # before this process holds a GL context or threads: the workers get the cores
+        out["staged"] = staging_timings()
+    if plan.batch:
         from orthosim_bench.batch import batch_throughput
 
         if run_case is None:
             raise ValueError("run_bench(batch=True) needs run_case, the CLI's run of one case")
-        batch_record = batch_throughput(run_case, Path(case) if case is not None else DEFAULT_CASE)
-    synthetic = SyntheticMotion(dentition, n_markers=n_markers)
-    n_states = warmup + frames
-    states = [synthetic(i) for i in range(n_states)]  # render alone: the same states for every variant
+        out["batch"] = batch_throughput(run_case, plan.case_path)
+    return out
 
-    mem_start = rss_mb()
-    renderer = Renderer(size)
-    scene = DentitionScene(dentition, size)
-    gl_renderer, gl_version = renderer.gl_renderer, renderer.gl_version
 
-    # ---- render alone: draw + read back, the scene updated outside the timed region
-    render_times = []
+def _render_alone(renderer, scene, states, warmup: int) -> list[float]:
+    """Seconds of draw + read back per frame after the warm-up; the scene updated outside the timed region."""
+    times = []
     for i, st in enumerate(states):
         scene.update(st)
         t0 = time.perf_counter()
         renderer.render(scene, "frontal")
         if i >= warmup:
-            render_times.append(time.perf_counter() - t0)
+            times.append(time.perf_counter() - t0)
+    return times
 
-    def end_to_end(state_iter, warm: int = warmup, caption=None) -> dict:
-        """Frame-to-frame wall time of `render_run` itself, the function `orthosim run` draws with:
-        states taken ahead on a thread (from a child process when `state_iter` reads one), scene
-        update, render, read back, the overlay when `caption` is given (a `orthosim_render.overlay.FrameCaption`),
-        encode on the sink's threads. Timed through its `on_frame` callback."""
-        stamps, markers, drawn, moving = [], [], [], []
-        cpu: dict = {}
 
-        def on_frame(st, sc):
-            stamps.append(time.perf_counter())
-            if len(stamps) in (warm, warm + frames):  # CPU of every thread and child over the measured frames
-                cpu[len(stamps)] = cpu_snapshot()
-            markers.append(st.n_contacts)
-            drawn.append(len(sc.markers.positions) if st.n_contacts else 0)
-            moving.append(len(st.moving))
+def _end_to_end(plan: BenchPlan, dentition, state_iter, warm: int | None = None, caption=None) -> dict:
+    """Frame-to-frame wall time of `render_run` itself, the function `orthosim run` draws with:
+    states taken ahead on a thread (from a child process when `state_iter` reads one), scene
+    update, render, read back, the overlay when `caption` is given (a `orthosim_render.overlay.FrameCaption`),
+    encode on the sink's threads. Timed through its `on_frame` callback."""
+    import tempfile
 
-        tmp_ctx = tempfile.TemporaryDirectory(prefix="orthosim-bench-") if work_dir is None else None
-        out_dir = Path(work_dir) if work_dir is not None else Path(tmp_ctx.name)
-        render_run(dentition, state_iter, out_dir, views=("frontal",), size=size, png=png, mp4=True, progress=False,
-                   caption=caption, on_frame=on_frame)
-        done = time.perf_counter()
-        first = max(warm, 1)  # a frame's time runs from the frame before it
-        times = np.diff(stamps)[first - 1:].tolist()
-        measured = slice(warm, None)
-        # frames after the warm-up over the time from the warm-up's last frame to the encoders drained
-        overall = (len(stamps) - first) / (done - stamps[first - 1]) if len(stamps) > first else float("nan")
-        mp4 = out_dir / "animation.mp4"
-        mp4_bytes = mp4.stat().st_size if mp4.exists() else 0
-        if tmp_ctx is not None:
-            tmp_ctx.cleanup()
-        return {"fps": _median_fps(times), "fps_overall_including_encoder_drain": overall, "mp4_bytes": mp4_bytes,
-                "markers_per_frame": {"median": float(np.median(markers[measured])), "max": int(max(markers[measured]))},
-                # a sphere the state lists several times is drawn once (DentitionScene.unique_markers)
-                "distinct_markers_drawn_per_frame": {"median": float(np.median(drawn[measured])),
-                                                     "max": int(max(drawn[measured]))},
-                # share of the measured frames in which some tooth moved: a case that has come to
-                # rest draws (cheaply) the same teeth again, so read the fps with this beside it
-                "frames_with_moving_teeth": float(np.mean([m > 0 for m in moving[measured]])),
-                # informative: where the CPU goes (ms per frame by thread group and child process);
-                # the total over the machine's cores bounds the frame rate end to end can reach
-                "cpu_ms_per_frame": cpu_ms_per_frame(cpu.get(warm), cpu.get(warm + frames), frames),
-                "cores": os.cpu_count()}
+    from orthosim_render.animation import render_run
 
-    encode = ["MP4 encode (libx264 ultrafast)"] + (["PNG frames (orthosim_render.png)"] if png else [])
-    e2e_synthetic = end_to_end(synthetic(i) for i in range(n_states))
-    e2e_synthetic["includes"] = ["synthetic state (SyntheticMotion)", "scene update", "draw", "colour read-back", *encode]
+    warm = plan.warmup if warm is None else warm
+    frames = plan.frames
+    stamps, markers, drawn, moving = [], [], [], []
+    cpu: dict = {}
 
-    # ---- the real thing: movement + continuous detection per step
-    pending: dict[str, str] = {}
-    fps_sim = None
-    sim_vs_detector = None
-    e2e_sim = None
-    e2e_interp = None
-    e2e_thread = None
-    e2e_overlay = None
-    collision = None
-    if case_obj is not None and simulate:
-        from orthosim.movement.simulation import MovementModel, simulate_case
-        from orthosim.movement.simulation import simulate as simulate_steps
+    def on_frame(st, sc):
+        stamps.append(time.perf_counter())
+        if len(stamps) in (warm, warm + frames):  # CPU of every thread and child over the measured frames
+            cpu[len(stamps)] = cpu_snapshot()
+        markers.append(st.n_contacts)
+        drawn.append(len(sc.markers.positions) if st.n_contacts else 0)
+        moving.append(len(st.moving))
 
-        movement_model = MovementModel.build(case_obj, dentition=dentition)
-        gen = simulate_steps(movement_model, detector, steps=n_states)
-        sim_times = []
-        for i in range(n_states):
-            t0 = time.perf_counter()
-            next(gen)
-            if i >= warmup:
-                sim_times.append(time.perf_counter() - t0)
-        gen.close()
-        fps_sim = _median_fps(sim_times)
-        sim_vs_detector = _step_against_detector(movement_model, detector, n_states, warmup)
-        # the pipeline of `orthosim run`: the simulation in a child process (orthosim.runtime.background),
-        # running ahead of the drawing through a bounded queue, so that it does not take turns
-        # with the drawing and encoding for this process's GIL
-        sim_steps = f"simulation step (orthosim.movement, {detector} detector)"
-        with in_child_process(simulate_case, case_obj, detector, n_states - 1, dentition=dentition,
-                              ignore_warnings=True) as records:
-            e2e_sim = end_to_end(FrameState.from_step(rec, extracted) for rec in records)
-        e2e_sim["includes"] = [f"{sim_steps} in a child process (orthosim.runtime.background), records sent "
-                               "through a bounded queue", "scene update", "draw", "colour read-back", *encode]
-        e2e_overlay = _overlay_figures(end_to_end, in_child_process, simulate_case, case_obj, detector, n_states,
-                                       dentition, extracted, e2e_sim)
-        # the same with the simulation on a thread of this process (`animation.prefetch` alone):
-        # what the child process buys, measured in this run
-        e2e_thread = end_to_end(FrameState.from_step(rec, extracted)
-                                for rec in simulate_steps(movement_model, detector, steps=n_states - 1))
-        e2e_thread["includes"] = [f"{sim_steps} on a thread of the drawing process (animation.prefetch)",
-                                  *e2e_sim["includes"][1:]]
-        if frames_per_step > 1:
-            # what `orthosim run` does by default: frames interpolated between steps
-            import itertools
+    tmp_ctx = tempfile.TemporaryDirectory(prefix="orthosim-bench-") if plan.work_dir is None else None
+    out_dir = Path(plan.work_dir) if plan.work_dir is not None else Path(tmp_ctx.name)
+    render_run(dentition, state_iter, out_dir, views=("frontal",), size=plan.size, png=plan.png, mp4=True, progress=False,
+               caption=caption, on_frame=on_frame)
+    done = time.perf_counter()
+    first = max(warm, 1)  # a frame's time runs from the frame before it
+    times = np.diff(stamps)[first - 1:].tolist()
+    measured = slice(warm, None)
+    # frames after the warm-up over the time from the warm-up's last frame to the encoders drained
+    overall = (len(stamps) - first) / (done - stamps[first - 1]) if len(stamps) > first else float("nan")
+    mp4 = out_dir / "animation.mp4"
+    mp4_bytes = mp4.stat().st_size if mp4.exists() else 0
+    if tmp_ctx is not None:
+        tmp_ctx.cleanup()
+    return {"fps": _median_fps(times), "fps_overall_including_encoder_drain": overall, "mp4_bytes": mp4_bytes,
+            "markers_per_frame": {"median": float(np.median(markers[measured])), "max": int(max(markers[measured]))},
+            # a sphere the state lists several times is drawn once (DentitionScene.unique_markers)
+            "distinct_markers_drawn_per_frame": {"median": float(np.median(drawn[measured])),
+                                                 "max": int(max(drawn[measured]))},
+            # share of the measured frames in which some tooth moved: a case that has come to
+            # rest draws (cheaply) the same teeth again, so read the fps with this beside it
+            "frames_with_moving_teeth": float(np.mean([m > 0 for m in moving[measured]])),
+            # informative: where the CPU goes (ms per frame by thread group and child process);
+            # the total over the machine's cores bounds the frame rate end to end can reach
+            "cpu_ms_per_frame": cpu_ms_per_frame(cpu.get(warm), cpu.get(warm + frames), frames),
+            "cores": os.cpu_count()}
 
-            from orthosim_render.timeline import frames_from_steps
 
-            # warm up over the same simulation steps as the other figures (a case's first steps,
-            # where collisions are resolved, are much slower than the rest)
-            warm = 1 + (warmup - 1) * frames_per_step
-            with in_child_process(simulate_case, case_obj, detector, n_states, dentition=dentition,
-                                  ignore_warnings=True) as records:
-                steps = frames_from_steps(records, extracted, frames_per_step)
-                e2e_interp = end_to_end(itertools.islice(steps, warm + frames), warm=warm)
-            e2e_interp["frames_per_step"] = frames_per_step
-            e2e_interp["includes"] = [f"one simulation step per {frames_per_step} frames, poses interpolated "
-                                      "between steps (orthosim_render.timeline, as `orthosim run`)", *e2e_sim["includes"]]
-        from orthosim_bench.collision import collision_timings
+def _simulated_figures(plan: BenchPlan, model: _BenchModel, encode: list[str]) -> dict:
+    """The real thing: movement + detection per step. The simulation alone, the step against the
+    continuous detector, end to end as `orthosim run` draws (simulation in a child process, on a
+    thread, with interpolated frames, with the overlay) and the collision timings."""
+    import functools
 
-        collision = collision_timings(dentition, model=movement_model.collision, repeats=collision_repeats)
-    elif case_obj is None:
-        pending["simulation"] = "no case given (a bare dentition): end_to_end uses SyntheticMotion"
-    else:
-        pending["simulation"] = "switched off (--no-simulate): end_to_end uses SyntheticMotion"
+    from orthosim.movement.simulation import MovementModel, simulate as simulate_steps
+    from orthosim.movement.simulation import simulate_case
+    from orthosim.runtime.background import in_child_process
 
-    # ---- memory over a long run (same renderer and scene: what a real run does)
+    case, dentition, extracted, detector, n_states = model.case, model.dentition, model.extracted, plan.detector, plan.n_states
+    end_to_end = functools.partial(_end_to_end, plan, dentition)
+    movement_model = MovementModel.build(case, dentition=dentition)
+    gen = simulate_steps(movement_model, detector, steps=n_states)
+    sim_times = []
+    for i in range(n_states):
+        t0 = time.perf_counter()
+        next(gen)
+        if i >= plan.warmup:
+            sim_times.append(time.perf_counter() - t0)
+    gen.close()
+    out = {"fps_sim": _median_fps(sim_times),
+           "sim_vs_detector": _step_against_detector(movement_model, detector, n_states, plan.warmup)}
+    # the pipeline of `orthosim run`: the simulation in a child process (orthosim.runtime.background),
+    # running ahead of the drawing through a bounded queue, so that it does not take turns
+    # with the drawing and encoding for this process's GIL
+    sim_steps = f"simulation step (orthosim.movement, {detector} detector)"
+    with in_child_process(simulate_case, case, detector, n_states - 1, dentition=dentition, ignore_warnings=True) as records:
+        e2e_sim = end_to_end(FrameState.from_step(rec, extracted) for rec in records)
+    e2e_sim["includes"] = [f"{sim_steps} in a child process (orthosim.runtime.background), records sent "
+                           "through a bounded queue", "scene update", "draw", "colour read-back", *encode]
+    out["e2e_sim"] = e2e_sim
+    out["e2e_overlay"] = _overlay_figures(end_to_end, in_child_process, simulate_case, case, detector, n_states,
+                                          dentition, extracted, e2e_sim)
+    # the same with the simulation on a thread of this process (`animation.prefetch` alone):
+    # what the child process buys, measured in this run
+    e2e_thread = end_to_end(FrameState.from_step(rec, extracted)
+                            for rec in simulate_steps(movement_model, detector, steps=n_states - 1))
+    e2e_thread["includes"] = [f"{sim_steps} on a thread of the drawing process (animation.prefetch)", *e2e_sim["includes"][1:]]
+    out["e2e_thread"] = e2e_thread
+    out["e2e_interp"] = _interpolated_figure(plan, model, end_to_end, e2e_sim) if plan.frames_per_step > 1 else None
+    from orthosim_bench.collision import collision_timings
+
+    out["collision"] = collision_timings(dentition, model=movement_model.collision, repeats=plan.collision_repeats)
+    return out
+
+
+def _interpolated_figure(plan: BenchPlan, model: _BenchModel, end_to_end, e2e_sim: dict) -> dict:
+    """What `orthosim run` does by default: frames interpolated between steps."""
+    import itertools
+
+    from orthosim.movement.simulation import simulate_case
+    from orthosim.runtime.background import in_child_process
+    from orthosim_render.timeline import frames_from_steps
+
+    # warm up over the same simulation steps as the other figures (a case's first steps,
+    # where collisions are resolved, are much slower than the rest)
+    warm = 1 + (plan.warmup - 1) * plan.frames_per_step
+    with in_child_process(simulate_case, model.case, plan.detector, plan.n_states, dentition=model.dentition,
+                          ignore_warnings=True) as records:
+        steps = frames_from_steps(records, model.extracted, plan.frames_per_step)
+        e2e_interp = end_to_end(itertools.islice(steps, warm + plan.frames), warm=warm)
+    e2e_interp["frames_per_step"] = plan.frames_per_step
+    e2e_interp["includes"] = [f"one simulation step per {plan.frames_per_step} frames, poses interpolated "
+                              "between steps (orthosim_render.timeline, as `orthosim run`)", *e2e_sim["includes"]]
+    return e2e_interp
+
+
+def _memory_over_long_run(plan: BenchPlan, renderer, scene, synthetic, mem_start: float) -> dict:
+    """Resident MB over a long run in this process (same renderer and scene: what a real run does)."""
     mem_before_long = rss_mb()
     mem_settled = mem_before_long
-    settle = max(1, memory_frames // 10)  # allocator pools fill during the first frames
+    settle = max(1, plan.memory_frames // 10)  # allocator pools fill during the first frames
     t0 = time.perf_counter()
-    for i in range(memory_frames):
+    for i in range(plan.memory_frames):
         scene.update(synthetic(i))
         renderer.render(scene, ("frontal", "left_buccal")[i % 2])  # two views: two cached images
         if i == settle - 1:
             mem_settled = rss_mb()
-    long_fps = memory_frames / (time.perf_counter() - t0) if memory_frames else None
+    long_fps = plan.memory_frames / (time.perf_counter() - t0) if plan.memory_frames else None
     mem_end = rss_mb()
-    renderer.close()
+    return {"start": mem_start, "before_long_run": mem_before_long, f"after_{settle}_frames": mem_settled, "end": mem_end,
+            "growth_after_settling": mem_end - mem_settled, "long_run_frames": plan.memory_frames, "long_run_fps": long_fps}
 
-    variants = _render_variants(dentition, states, size, frames_per_round=max(10, frames // 10),
-                                rounds=variant_rounds)
 
-    fps_render = _median_fps(render_times)
-    e2e = e2e_sim if e2e_sim is not None else e2e_synthetic
-    record = {
-        "machine": {
-            "cores": os.cpu_count(),
-            "gl_renderer": gl_renderer,
-            "gl_version": gl_version,
-            "python": platform.python_version(),
-            "load_average_start": list(load_start),
-            "load_average_end": list(os.getloadavg()),
-        },
+def _meets_targets(fps_sim, fps_render: float, e2e: dict, before: dict, collision) -> dict:
+    trees, staged = before["trees"], before["staged"]
+    return {
+        "simulation": None if fps_sim is None else fps_sim >= TARGET_FPS,
+        "render": fps_render >= TARGET_FPS,
+        "end_to_end": e2e["fps"] >= TARGET_FPS,
+        "end_to_end_60": e2e["fps"] >= E2E_TARGET_FPS,
+        "spheretree_build": None if trees is None else trees["meets_target"],
+        "staging": None if staged is None else staged["setup_28_teeth"]["staging_s"] < staged["setup_28_teeth"]["target_s"],
+        "stage_verify": None if staged is None else staged["verify_28_teeth"]["command_s"] < staged["verify_28_teeth"]["target_s"],
+        "collision": None if collision is None else {
+            k: (v is not None and 1e6 / v >= TARGET_FPS) for k, v in collision.get("collision_us_per_step", {}).items()},
+    }
+
+
+def _record(plan: BenchPlan, model: _BenchModel, before: dict, gl: dict, fps_render: float, e2e_synthetic: dict,
+            simulated: dict, pending: dict, memory_mb: dict, variants: dict, load_start) -> dict:
+    """The bench record (the output contract), from the figures measured."""
+    n_tri = {f: len(model.dentition.teeth[f].mesh.faces) for f in model.dentition.fdis}
+    fps_sim, collision, staged = simulated.get("fps_sim"), simulated.get("collision"), before["staged"]
+    e2e = simulated.get("e2e_sim") or e2e_synthetic
+    startup_record = before["startup"]
+    return {
+        "machine": {"cores": os.cpu_count(), **gl, "python": platform.python_version(),
+                    "load_average_start": list(load_start), "load_average_end": list(os.getloadavg())},
         "target_fps": TARGET_FPS,
         "end_to_end_target_fps": E2E_TARGET_FPS,
-        "model": {"source": model_name, "teeth": len(n_tri), "triangles_total": int(sum(n_tri.values())),
+        "model": {"source": model.name, "teeth": len(n_tri), "triangles_total": int(sum(n_tri.values())),
                   "triangles_min_per_tooth": int(min(n_tri.values())),
-                  "teeth_drawn": {"synthetic": len(n_tri), "simulated": len(n_tri) - len(extracted)}},
-        "size": list(size),
-        "contact_markers_render": n_markers,
-        "frames": frames,
-        "warmup": warmup,
-        "simulation_step_days": None if case_obj is None else case_obj.step_days,
+                  "teeth_drawn": {"synthetic": len(n_tri), "simulated": len(n_tri) - len(model.extracted)}},
+        "size": list(plan.size),
+        "contact_markers_render": plan.n_markers,
+        "frames": plan.frames,
+        "warmup": plan.warmup,
+        "simulation_step_days": None if model.case is None else model.case.step_days,
         "fps": {"simulation": fps_sim, "render": fps_render, "end_to_end": e2e["fps"]},
-        "meets_target": {
-            "simulation": None if fps_sim is None else fps_sim >= TARGET_FPS,
-            "render": fps_render >= TARGET_FPS,
-            "end_to_end": e2e["fps"] >= TARGET_FPS,
-            "end_to_end_60": e2e["fps"] >= E2E_TARGET_FPS,
-            "spheretree_build": None if trees is None else trees["meets_target"],
-            "staging": None if staged is None else staged["setup_28_teeth"]["staging_s"] < staged["setup_28_teeth"]["target_s"],
-            "collision": None if collision is None else {
-                k: (v is not None and 1e6 / v >= TARGET_FPS) for k, v in collision.get("collision_us_per_step", {}).items()},
-        },
+        "meets_target": _meets_targets(fps_sim, fps_render, e2e, before, collision),
         "end_to_end": e2e,
         "end_to_end_against_stages": _against_stages(e2e, fps_sim, fps_render, e2e_synthetic),
         "end_to_end_synthetic": e2e_synthetic,
-        "end_to_end_interpolated": e2e_interp,
-        "end_to_end_simulation_on_thread": e2e_thread,
-        "end_to_end_overlay": e2e_overlay,
+        "end_to_end_interpolated": simulated.get("e2e_interp"),
+        "end_to_end_simulation_on_thread": simulated.get("e2e_thread"),
+        "end_to_end_overlay": simulated.get("e2e_overlay"),
         "collision_us_per_step": None if collision is None else collision.get("collision_us_per_step"),
-        "simulation_step_against_continuous_interleaved": sim_vs_detector,
+        "simulation_step_against_continuous_interleaved": simulated.get("sim_vs_detector"),
         "collision_fps": None if collision is None else {
             k: (1e6 / v if v else None) for k, v in collision.get("collision_us_per_step", {}).items()},
         "collision": collision,
-        "spheretree_build": trees,
+        "spheretree_build": before["trees"],
         "startup_s": None if startup_record is None else startup_record["startup_s"],
         "startup": startup_record,
-        "labelled_scan": scan_record,
+        "labelled_scan": before["scan"],
         "staging_s": None if staged is None else {**{k: v["staging_s"] for k, v in staged["cases"].items()},
                                                    "setup_28_teeth": staged["setup_28_teeth"]["staging_s"]},
         "staging": staged,
-        "batch": batch_record if batch else None,
+        "batch": before["batch"],
         "pending": pending,
         "render_variants": variants,
-        "memory_mb": {"start": mem_start, "before_long_run": mem_before_long,
-                      f"after_{settle}_frames": mem_settled, "end": mem_end,
-                      "growth_after_settling": mem_end - mem_settled,
-                      "long_run_frames": memory_frames, "long_run_fps": long_fps},
-        "wall_s": time.perf_counter() - t_start,
+        "memory_mb": memory_mb,
     }
-    if memory:  # peak memory of a 10,000-step run and a 2,000-frame render, each in a fresh child process
+
+
+def _optional_studies(plan: BenchPlan, record: dict) -> None:
+    """The studies a bench run adds on request, each in its own fresh processes or renderer."""
+    if plan.memory:  # peak memory of a 10,000-step run and a 2,000-frame render, each in a fresh child process
         from orthosim_bench.memory import memory_timings
 
-        record["memory"] = memory_timings(case if case is not None else DEFAULT_CASE, size=size)
+        record["memory"] = memory_timings(plan.case_path, size=plan.size)
         record["meets_target"]["memory"] = record["memory"]["meets_target"]
-    if report:  # the paper's three cases x three detectors, from runs made (or kept) beforehand
+    if plan.report:  # the paper's three cases x three detectors, from runs made (or kept) beforehand
         from orthosim_bench.report import report_timings
 
-        record["report"] = report_timings(report_runs)
+        record["report"] = report_timings(plan.report_runs)
         record["report_s"] = record["report"]["report_s"]
         record["meets_target"]["report"] = record["report"]["meets_target"]
-    return record
+    if plan.labels:  # semantic goldens: the label pass against a golden's render, 320x240
+        from orthosim_bench.labels import label_pass_timings
+
+        record["label_pass"] = label_pass_timings()
+        record["meets_target"]["label_pass"] = record["label_pass"]["meets_target"]

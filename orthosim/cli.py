@@ -62,6 +62,7 @@ class _LazyGroup(click.Group):
         "spheretree": ("orthosim.spheretree.commands", "spheretree", "Build, export and evaluate sphere trees."),
         "collide": ("orthosim.collision.commands", "collide", "Collision accuracy studies, timings and single queries."),
         "batch": ("orthosim.batch.commands", "batch", "Many runs and parameter sweeps, on every core or a Dask cluster."),
+        "evidence": ("orthosim_render.evidence_page", "evidence_command", "Run the clinical evidence table; write a page."),
     }
 
     # commands that measurement (orthosim_bench, outside the product) adds to a lazy group
@@ -219,9 +220,13 @@ def check(cases: tuple[Path, ...]) -> None:
               help="Where the report's runs are made once and kept for later benches.")
 @click.option("--step-days", default=2.0, show_default=True, type=click.FloatRange(min=0.01),
               help="Simulation step for the bench, so the case's teeth keep moving through the measured frames.")
+@click.option("--labels", is_flag=True, help="Also time the label pass of semantic goldens against a golden's render.")
+@click.option("--closure", "closure_case", type=click.Path(path_type=Path), default=None,
+              help="Also time this (real-jaw) case's step with and without the bite's closure.")
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
           no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool,
-          no_staging: bool, no_batch: bool, no_report: bool, report_runs: Path, no_memory: bool, no_scan: bool) -> None:
+          no_staging: bool, no_batch: bool, no_report: bool, report_runs: Path, no_memory: bool, labels: bool,
+          closure_case: Path | None, no_scan: bool) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -234,7 +239,12 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
                        step_days=step_days, tree_build=not no_tree_build, startup=not no_startup,
                        staging=not no_staging, batch=not no_batch, report=not no_report, report_runs=report_runs,
-                       memory=not no_memory, run_case=run_case, scan=not no_scan)
+                       memory=not no_memory, run_case=run_case, labels=labels, scan=not no_scan)
+    if closure_case is not None:
+        from orthosim_bench.closure import closure_timings
+
+        record["closure"] = closure_timings(closure_case)
+        click.echo(f"closure: {record['closure']['closure_over_rest_of_step']:.2f} of the rest of the step (target <= 1)")
     write_json(out_file, record)
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
@@ -248,11 +258,18 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
         click.echo(f"sphere trees of {trees['teeth']} teeth built in {trees['build_s']:.1f} s on {trees['workers']} cores "
                    f"(target {trees['target_s']:.0f} s; one process {trees['build_s_one_process']:.1f} s), "
                    f"loaded in {1000 * trees['load_s']:.0f} ms")
+    if record.get("label_pass"):
+        lp = record["label_pass"]
+        click.echo(f"label pass: at most {100 * lp['worst_ratio']:.0f} % of a golden's render time "
+                   f"(target {100 * lp['target_ratio']:.0f} %; draw alone {100 * lp['worst_ratio_draw_alone']:.0f} %)")
     staged = record.get("staging")
     if staged:
         big = staged["setup_28_teeth"]
         click.echo(f"staging: {big['teeth']} teeth, {big['stages']} stages planned in {big['staging_s']:.1f} s "
                    f"(target {big['target_s']:.0f} s); " + ", ".join(f"{k} {v['staging_s']:.1f} s" for k, v in staged["cases"].items()))
+        v = staged["verify_28_teeth"]
+        click.echo(f"stage verify: {v['stages']} stages of {v['teeth']} teeth checked in {v['verify_s']:.1f} s "
+                   f"(target {v['target_s']:.0f} s; x{v['verify_to_planning']:.2f} its planning time)")
     if record.get("report"):
         r = record["report"]
         click.echo(f"report of {r['cases']} cases x 3 detectors from existing runs: {r['report_s']:.1f} s "
@@ -263,26 +280,51 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
                    f"with 2 (x{b['ratio_2_to_1']:.2f}, target x{b['target_ratio_2_to_1']})")
     m = record.get("memory")
     if m:
-        click.echo(f"peak memory: {m['run_10k_steps_no_render_mb']:.0f} MB for {m['run_no_render']['steps']} steps without "
+        click.echo(f"peak private memory: {m['run_10k_steps_no_render_mb']:.0f} MB for {m['run_no_render']['steps']} steps without "
                    f"rendering, {m['render_2000_frames_mb']:.0f} MB for {m['render']['frames']} frames (target {m['target_mb']:.0f} MB)")
 
 
 
-@main.command()
+class _DefaultCommandGroup(click.Group):
+    """A group whose first argument, when it names none of its commands, goes to `default`:
+    `orthosim stage CASE --out DIR` plans, `orthosim stage verify DIR` checks."""
+
+    default = "plan"
+
+    def parse_args(self, ctx, args):
+        if args and args[0] not in self.commands and args[0] not in ctx.help_option_names:
+            args = [self.default, *args]
+        return super().parse_args(ctx, args)
+
+
+@main.group(cls=_DefaultCommandGroup)
+def stage() -> None:
+    """Aligner staging: plan a case's set-up, or re-check a written staging.
+
+    `orthosim stage CASE --out DIR` plans (the `plan` command); `orthosim stage verify DIR` checks."""
+
+
+@stage.command("plan")
 @click.argument("case", type=click.Path(path_type=Path))
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Output folder.")
 @click.option("--limits", default=None,
               help="Per-stage limits (mm, degrees); any subset of mesial=0.25,buccal=0.25,extrusion=0.15,tip=2,torque=1,rotation=2.")
-@click.option("--no-render", is_flag=True, help="Write the chart and poses only; no animation.")
+@click.option("--no-render", is_flag=True, help="No animation and no 3D pictures (the charts and the page are still written).")
 @click.option("--size", default="640x480", show_default=True, callback=_size, help="Image size WIDTHxHEIGHT.")
 @click.option("--view", "views", multiple=True, help="Camera preset (repeatable). Default: frontal and mandibular_occlusal.")
 @click.option("--frames-per-stage", default=6, show_default=True, type=click.IntRange(1, 120), help="Animation frames per stage.")
 @click.option("--gif", is_flag=True, help="Also write animation.gif.")
-def stage(case: Path, out_dir: Path, limits: str | None, no_render: bool, size, views, frames_per_stage: int, gif: bool) -> None:
-    """Split a case's set-up ([target]) into aligner stages: within per-stage limits, free of contact."""
-    from orthosim.runtime.runfolder import write_run_record
-    from orthosim.staging.chart import summary_line, write_outputs
-    from orthosim.staging.commands import plan_case
+@click.option("--export", "export", type=click.Choice(["stl", "ply", "glb"]), default=None,
+              help="Also write every stage's arches for the lab: models/stage_NN_upper.FMT and _lower (mm, case frame).")
+def stage_plan(case: Path, out_dir: Path, limits: str | None, no_render: bool, size, views, frames_per_stage: int,
+               gif: bool, export: str | None) -> None:
+    """Split a case's set-up ([target]) into aligner stages: within per-stage limits, free of contact.
+
+    Writes stages.json, staging.csv, ipr.csv, movement.csv, certificate.json, charts/, index.html
+    (and the animation, and with --export the stage models) into a private folder that replaces
+    --out whole at the end."""
+    from orthosim.runtime.outputfolder import output_folder
+    from orthosim.staging.chart import summary_line
     from orthosim.staging.limits import StageLimits
 
     parsed = StageLimits.parse(limits)
@@ -290,17 +332,62 @@ def stage(case: Path, out_dir: Path, limits: str | None, no_render: bool, size, 
         from orthosim_render.cameras import check_view
 
         views = [check_view(v) for v in views or ("frontal", "mandibular_occlusal")]
-    run = plan_case(case, parsed)
+    with output_folder(out_dir) as private:
+        run, cert = _stage_into(case, private, parsed, None if no_render else views, size, frames_per_stage, gif, export)
+    click.echo(f"{summary_line(run.plan, run.case.name)}; certificate: "
+               f"{'within limits' if cert['within_limits'] else 'LIMITS EXCEEDED'}, "
+               f"{'contact-free' if cert['contact_free'] else 'CONTACT'} -> {out_dir}/index.html")
+
+
+def _stage_into(case: Path, out: Path, limits, views, size, frames_per_stage: int, gif: bool, export: str | None):
+    """Plan and write one staging into the (private) folder `out`; returns (run, certificate summary)."""
+    from orthosim.runtime.runfolder import file_sha256, write_run_record
+    from orthosim.staging.certificate import certificate_record, certify
+    from orthosim.staging.chart import write_outputs
+    from orthosim.staging.commands import plan_case
+    from orthosim.storage.atomic import write_json
+    from orthosim_render.staging_page import write_staging_page
+
+    run = plan_case(case, limits)
     extra = {"kind": "staging", "stages": run.plan.n_stages, "lower_bound": run.plan.lower_bound,
              "ipr_total_mm": run.plan.ipr_total_mm, "planning_s": run.plan.planning_s}
-    if not no_render:
+    if views is not None:
         from orthosim_render.staging import render_staging
 
-        extra["animation"] = render_staging(run, out_dir, views=views, size=size,
-                                            frames_per_stage=frames_per_stage, gif=gif)
-    write_outputs(run.plan, out_dir, case)
-    write_run_record(out_dir, case, "continuous", extra)  # last: marks the folder finished
-    click.echo(f"{summary_line(run.plan, run.case.name)} -> {out_dir}/staging.csv")
+        extra["animation"] = render_staging(run, out, views=views, size=size, frames_per_stage=frames_per_stage, gif=gif)
+    write_outputs(run.plan, out, case)
+    record = certificate_record(certify(run.plan, run.dentition), Path(case).resolve(), file_sha256(case))
+    write_json(out / "certificate.json", record)
+    if export:
+        from orthosim.staging.models import export_stage_models
+
+        plan = run.plan
+        export_stage_models(run.dentition, [plan.poses(k) for k in range(plan.n_stages + 1)], out / "models", export)
+    write_staging_page(run, record, out, pictures=views is not None)
+    write_run_record(out, case, "continuous", extra)  # last: marks the folder finished
+    return run, record["summary"]
+
+
+@stage.command("verify")
+@click.argument("folder", type=click.Path(path_type=Path))
+@click.option("--case", "case", type=click.Path(path_type=Path), default=None,
+              help="The case it was staged from (default: the one stages.json names).")
+@click.option("--limits", default=None, help="Check against these limits instead of the ones the staging was planned with.")
+@click.option("--all", "show_all", is_flag=True, help="Print every violation, one line each, not only the first.")
+def stage_verify(folder: Path, case: Path | None, limits: str | None, show_all: bool) -> None:
+    """Re-check a written staging from its files alone: limits per component, and no contact along
+    any stage's motion (dense exact sampling). Exit 0 when every stage holds, 1 naming the first violation."""
+    from orthosim.staging.limits import StageLimits
+    from orthosim.staging.verify import load_for_verify, verify_staging
+
+    parsed = StageLimits.parse(limits) if limits else None
+    written, dent, start, target = load_for_verify(folder, case)
+    verdict = verify_staging(written, dent, start, target, parsed, folder=folder)
+    click.echo(verdict.line())
+    for v in verdict.violations[1:] if show_all else ():
+        click.echo(f"{folder}: stage {v.stage}: {v.kind}: {v.text}")
+    if not verdict.holds:
+        sys.exit(1)
 
 
 @main.command()
@@ -313,19 +400,27 @@ def stage(case: Path, out_dir: Path, limits: str | None, no_render: bool, size, 
 @click.option("--max-fraction", default=0.001, show_default=True, type=float,
               help="Tolerance mode: fraction of pixels allowed to differ (0.001 = 0.1 %).")
 @click.option("--update", is_flag=True, help="Make the candidate the golden: rewrite GOLDEN.png and GOLDEN.json.")
+@click.option("--ignore", multiple=True, metavar="LABEL",
+              help="Leave out the pixels of a kind (gingiva, contact, marker, background), a tooth (13) or a contact "
+                   "(\"contact 13-14\"); repeatable; needs labels on both sides.")
+@click.option("--max-shift-px", default=0.0, show_default=True, type=float,
+              help="Tolerate a tooth or contact that only moved this many pixels (needs labels on both sides).")
 def imgdiff(golden: Path, candidate: Path, diff_path: Path | None, max_level: int, max_fraction: float,
-            update: bool) -> None:
+            update: bool, ignore: tuple[str, ...], max_shift_px: float) -> None:
     """Compare a render with its golden PNG; exit 0 match, 1 differ, 2 unusable input.
 
     Exact when the candidate was drawn by the GL renderer and Mesa version the golden's sidecar
-    (GOLDEN.json) names, else within tolerance (SSIM reported). See render/imgdiff.py.
+    (GOLDEN.json) names, else within tolerance (SSIM reported). When both carry labels
+    (GOLDEN.labels.npz/.json) a second line says what changed, tooth by tooth. See render/imgdiff.py.
     """
     from orthosim_render.imgdiff import Tolerance, imgdiff as compare
     from orthosim_render.regression import this_machine_gl
 
     outcome = compare(golden, candidate, diff_path=diff_path, tolerance=Tolerance(max_level, max_fraction),
-                      update=update, this_machine=this_machine_gl)
-    click.echo(outcome.line)
+                      update=update, this_machine=this_machine_gl, max_shift_px=max_shift_px,
+                      ignore=tuple(int(item) if item.isdigit() else item for item in ignore))
+    for line in outcome.lines:
+        click.echo(line)
     if outcome.exit_code:
         sys.exit(outcome.exit_code)
 

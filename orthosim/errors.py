@@ -49,3 +49,8 @@ class MeshError(OrthosimError):
 
 class SphereTreeError(OrthosimError):
     """A sphere-tree file or build request is invalid."""
+
+
+class DamagedFileError(OrthosimError):
+    """A file orthosim wrote earlier (a cache entry, a run folder, a batch table, a staging file) is
+    damaged or not what it should be: caches rebuild it with a warning, other readers refuse it."""

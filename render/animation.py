@@ -31,7 +31,7 @@ from typing import Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from orthosim.storage.atomic import atomic_path
-from orthosim.runtime.background import release_compiler_pages, release_freed_heap
+from orthosim.runtime.background import release_freed_heap
 
 from orthosim_render.cameras import check_view
 from orthosim_render.frame_state import FrameState
@@ -358,8 +358,7 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
     workers); a run alone wants the pipeline, which keeps more than one core busy.
 
     Memory: once the scene is built, the dentition's meshes forget their trimesh caches
-    (`Dentition.drop_mesh_caches`: derived values, computed again if asked for), and once the first
-    frame is drawn llvmpipe's LLVM code pages are handed back (`orthosim.runtime.background.release_compiler_pages`).
+    (`Dentition.drop_mesh_caches`: derived values, computed again if asked for).
 
     Returns {"frames": n, "fps": end-to-end frames per second (render, read back, encode, write),
     "render_fps": ..., "views": [...], "size": [w, h], "encode_s": time to flush the encoders, ...}.
@@ -404,8 +403,6 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
                         frame = tile(images)
                     previous = state
                 sink.add(frame, images if split_views else ())
-                if n == 0:  # llvmpipe has compiled the scene's shaders: its LLVM's code lies idle from now on
-                    release_compiler_pages()
                 if on_frame is not None:
                     on_frame(state, scene)
                 n += 1

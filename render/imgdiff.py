@@ -28,18 +28,15 @@ import numpy as np
 
 from orthosim import __version__
 from orthosim.storage.atomic import write_bytes, write_json
-from orthosim.errors import OrthosimError
 
+from orthosim_render.imageerrors import ImageInputError  # defined apart (no import cycle), still imgdiff.ImageInputError
 from orthosim_render.png import encode_png
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 DIFF_COLOUR = (255, 0, 220)  # differences beyond tolerance: a magenta no lit tooth or grey can take
 WITHIN_COLOUR = (60, 150, 255)  # differences within tolerance (tolerance mode only): a quieter blue
+TOLERATED_COLOUR = (235, 200, 40)  # differences left out by label (a tolerated shift, an ignored kind): amber
 BOX_MARGIN = 4  # px: the box drawn around all differences, so that a single changed pixel is found
-
-
-class ImageInputError(OrthosimError):
-    """A golden or candidate image (or its sidecar) is missing, unreadable, truncated, not a PNG, or of another size."""
 
 
 @dataclass(frozen=True)
@@ -160,9 +157,19 @@ def read_png(path: str | Path, role: str = "image") -> np.ndarray:
     return np.ascontiguousarray(pixels, dtype=np.uint8)
 
 
-def write_golden(png: str | Path, image: np.ndarray, sidecar: GoldenSidecar) -> None:
-    """Write `image` as the golden PNG and its sidecar, each atomically (zlib level 9: goldens are committed)."""
+def write_golden(png: str | Path, image: np.ndarray, sidecar: GoldenSidecar, labels=None) -> None:
+    """Write `image` as the golden PNG and its sidecar, each atomically (zlib level 9: goldens are committed).
+
+    `labels`: the image's `orthosim_render.labels.LabelFrame`, written beside it; None removes any
+    label files left from an earlier golden (they would describe other pixels).
+    """
+    from orthosim_render.labels import remove_labels, write_labels
+
     image = np.ascontiguousarray(image, dtype=np.uint8)
+    if labels is not None:
+        write_labels(png, labels, image)
+    else:
+        remove_labels(png)
     write_bytes(png, encode_png(image, level=9))
     h, w = image.shape[:2]
     write_json(sidecar_path(png), dataclasses.replace(sidecar, size=(w, h)).to_json())
@@ -182,10 +189,12 @@ class Comparison:
     ssim: float  # structural similarity, scikit-image, 1.0 = identical
     tolerance: Tolerance
     notes: tuple[str, ...] = ()  # e.g. the golden was made from another version of its case
+    masked_pixels: int = 0  # pixels left out by label (tolerated changes, ignored kinds); counted in none of the above
 
     @property
     def pixels(self) -> int:
-        return self.size[0] * self.size[1]
+        """The pixels compared: the image's, less those left out by label."""
+        return self.size[0] * self.size[1] - self.masked_pixels
 
     @property
     def failing_pixels(self) -> int:
@@ -202,7 +211,8 @@ class Comparison:
                        f"({100 * self.beyond_pixels / self.pixels:.3f} %, limit {100 * self.tolerance.max_fraction:.3f} %)")
         text = (f"{'match' if self.matched else 'differ'} ({self.mode}: {self.mode_reason}): {figures}, "
                 f"largest difference {self.largest_level} level{'' if self.largest_level == 1 else 's'}, SSIM {self.ssim:.4f}")
-        return "; ".join([text, *self.notes])
+        masked = [f"{self.masked_pixels} pixels left out by label"] if self.masked_pixels else []
+        return "; ".join([text, *masked, *self.notes])
 
 
 def choose_mode(golden: GoldenSidecar | None, candidate: GoldenSidecar | None) -> tuple[str, str]:
@@ -247,10 +257,12 @@ def _ssim(golden: np.ndarray, candidate: np.ndarray) -> float:
 
 def compare_images(golden: np.ndarray, candidate: np.ndarray, golden_sidecar: GoldenSidecar | None = None,
                    candidate_sidecar: GoldenSidecar | None = None, tolerance: Tolerance = Tolerance(),
-                   names: tuple[str, str] = ("golden", "candidate")) -> Comparison:
+                   names: tuple[str, str] = ("golden", "candidate"), mask: np.ndarray | None = None) -> Comparison:
     """Compare two (h, w, 3|4) uint8 images; the mode comes from the sidecars (see `choose_mode`).
 
-    ImageInputError when the sizes differ. `names` name the two images in that message.
+    ImageInputError when the sizes differ. `names` name the two images in that message. `mask`:
+    None, or (h, w) bool, True where a pixel is left out (a tolerated change, found by label; see
+    `orthosim_render.explain`); the verdict and every figure count the other pixels only.
     """
     golden, candidate = _same_channels(golden, candidate)
     if golden.shape[:2] != candidate.shape[:2]:
@@ -260,31 +272,82 @@ def compare_images(golden: np.ndarray, candidate: np.ndarray, golden_sidecar: Go
                               f"render the candidate at {gw}x{gh}, or replace the golden with --update")
     mode, reason = choose_mode(golden_sidecar, candidate_sidecar)
     level = np.abs(golden.astype(np.int16) - candidate.astype(np.int16)).max(axis=2)
+    h, w = level.shape
+    masked = 0
+    if mask is not None:
+        mask = np.asarray(mask, bool)
+        masked = int(mask.sum())
+        level = np.where(mask, 0, level)
     differing = int(np.count_nonzero(level))
     beyond = int(np.count_nonzero(level > tolerance.max_level))
-    h, w = level.shape
     if mode == "exact":
         matched = differing == 0
     else:
-        matched = beyond <= tolerance.max_fraction * h * w
+        matched = beyond <= tolerance.max_fraction * (h * w - masked)
     notes = []
     if (golden_sidecar is not None and candidate_sidecar is not None and golden_sidecar.case_sha256
             and candidate_sidecar.case_sha256 and golden_sidecar.case_sha256 != candidate_sidecar.case_sha256):
         notes.append(f"the golden was made from another version of {golden_sidecar.case_file or 'its case file'} "
                      f"(sha256 {golden_sidecar.case_sha256[:12]} vs {candidate_sidecar.case_sha256[:12]} now)")
     return Comparison(matched, mode, reason, (w, h), differing, beyond, int(level.max(initial=0)),
-                      _ssim(golden, candidate), tolerance, tuple(notes))
+                      _ssim(golden, candidate), tolerance, tuple(notes), masked)
 
 
-def diff_image(golden: np.ndarray, candidate: np.ndarray, comparison: Comparison) -> np.ndarray:
+def compare_labelled(golden: np.ndarray, candidate: np.ndarray, golden_sidecar: GoldenSidecar | None,
+                     candidate_sidecar: GoldenSidecar | None, tolerance: Tolerance, names: tuple[str, str],
+                     golden_labels=None, candidate_labels=None, ignore=(), max_shift_px=0.0):
+    """`compare_images`, plus what changed when both images carry labels: (Comparison, Explanation or
+    None, the mask of pixels left out or None).
+
+    `ignore` (kinds such as "gingiva" or "contact", FDI numbers, "tooth 13", "contact 13-14") and
+    `max_shift_px` (px: a thing that only moved this far is tolerated; or a mapping such as
+    {"contact": 2, 13: 1}, see `Explanation.tolerated_mask`) leave those things' pixels out of
+    the verdict; they need labels on both sides, and without them every pixel is compared (a note
+    says so).
+    """
+    from orthosim_render.explain import check_tolerances
+
+    ignore = check_tolerances(ignore, max_shift_px)
+    explanation = mask = None
+    asked = bool(ignore) or bool(max_shift_px)
+    same_size = np.shape(golden)[:2] == np.shape(candidate)[:2]
+    notes = ()
+    if golden_labels is not None and candidate_labels is not None and golden_labels.camera != candidate_labels.camera:
+        notes = (f"the labels were drawn from other cameras ({golden_labels.camera.view} vs "
+                 f"{candidate_labels.camera.view}), so only pixels were compared",)
+        golden_labels = candidate_labels = None
+    if golden_labels is not None and candidate_labels is not None and same_size:
+        g3, c3 = _same_channels(golden, candidate)
+        if not np.array_equal(g3, c3):
+            from orthosim_render.explain import explain
+
+            explanation = explain(g3, golden_labels, c3, candidate_labels, tolerance.max_level)
+            if asked:
+                mask = explanation.tolerated_mask(np.shape(golden)[:2], ignore, max_shift_px)
+    comparison = compare_images(golden, candidate, golden_sidecar, candidate_sidecar, tolerance, names, mask)
+    comparison = dataclasses.replace(comparison, notes=comparison.notes + notes) if notes else comparison
+    if asked and (golden_labels is None or candidate_labels is None):
+        side = names[0] if golden_labels is None else names[1]
+        comparison = dataclasses.replace(comparison, notes=comparison.notes + (
+            f"{side} has no labels, so ignore/max_shift_px could not apply: every pixel was compared",))
+    return comparison, explanation, mask
+
+
+def diff_image(golden: np.ndarray, candidate: np.ndarray, comparison: Comparison,
+               mask: np.ndarray | None = None) -> np.ndarray:
     """(h, 3w, 3) uint8: golden | candidate | differences over a grey copy of the golden.
 
     Pixels that count against the verdict are DIFF_COLOUR, with a box of the same colour around
     all of them (a one-pixel difference is otherwise hard to find); in tolerance mode, pixels that
-    differ within tolerance are WITHIN_COLOUR.
+    differ within tolerance are WITHIN_COLOUR; pixels that differ but were left out by `mask` (see
+    `compare_images`) are TOLERATED_COLOUR.
     """
     golden, candidate = _same_channels(golden, candidate)
     level = np.abs(golden.astype(np.int16) - candidate.astype(np.int16)).max(axis=2)
+    tolerated = np.zeros(level.shape, bool)
+    if mask is not None:
+        tolerated = np.asarray(mask, bool) & (level > 0)
+        level = np.where(mask, 0, level)
     rgb_g, rgb_c = golden[:, :, :3], candidate[:, :, :3]
     luminance = rgb_g.astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
     grey = (60 + 0.45 * luminance).astype(np.uint8)  # dimmed, so that the colours stand out
@@ -292,6 +355,7 @@ def diff_image(golden: np.ndarray, candidate: np.ndarray, comparison: Comparison
     failing = level > 0 if comparison.mode == "exact" else level > comparison.tolerance.max_level
     if comparison.mode != "exact":
         panel[(level > 0) & ~failing] = WITHIN_COLOUR
+    panel[tolerated] = TOLERATED_COLOUR
     panel[failing] = DIFF_COLOUR
     if failing.any():
         rows, cols = np.nonzero(failing)
@@ -303,8 +367,9 @@ def diff_image(golden: np.ndarray, candidate: np.ndarray, comparison: Comparison
     return np.concatenate([rgb_g, rgb_c, panel], axis=1)
 
 
-def write_diff_image(path: str | Path, golden: np.ndarray, candidate: np.ndarray, comparison: Comparison) -> Path:
-    write_bytes(path, encode_png(diff_image(golden, candidate, comparison)))
+def write_diff_image(path: str | Path, golden: np.ndarray, candidate: np.ndarray, comparison: Comparison,
+                     mask: np.ndarray | None = None) -> Path:
+    write_bytes(path, encode_png(diff_image(golden, candidate, comparison, mask)))
     return Path(path)
 
 
@@ -322,50 +387,66 @@ class ImgdiffOutcome:
     line: str
     comparison: Comparison | None
     diff_path: Path | None
+    explanation: object | None = None  # orthosim_render.explain.Explanation when both images carry labels
+
+    @property
+    def lines(self) -> list[str]:
+        """What the command prints: the verdict line, then what changed when the labels can say."""
+        return [self.line] + ([f"what changed: {self.explanation.text()}"] if self.explanation is not None else [])
 
 
 def imgdiff(golden_path: str | Path, candidate_path: str | Path, *, diff_path: str | Path | None = None,
             tolerance: Tolerance = Tolerance(), update: bool = False,
-            this_machine=None) -> ImgdiffOutcome:
+            this_machine=None, ignore=(), max_shift_px: float = 0.0) -> ImgdiffOutcome:
     """The `orthosim imgdiff` command without the command line (unusable input: ImageInputError).
 
     The candidate's GL renderer and Mesa version come from its own sidecar (CANDIDATE.json) when it
     has one; otherwise from `this_machine()` (a `GoldenSidecar` or None, called only then), since
     a candidate without a sidecar was normally just rendered here. The diff image is written to
     `diff_path` when given, else beside the candidate when the images differ. `update` makes the
-    candidate the golden (PNG and sidecar), reporting what the comparison found first.
+    candidate the golden (PNG, sidecar and labels), reporting what the comparison found first.
+    When both images carry labels (`orthosim_render.labels`) and differ, the outcome also says what
+    changed, thing by thing (`orthosim_render.explain`), and DIFF.json beside the diff image holds the
+    same; a label file that is damaged or belongs to other pixels is refused (ImageInputError), never
+    half-used.
     """
+    from orthosim_render.labels import read_labels
+
     golden_path, candidate_path = Path(golden_path), Path(candidate_path)
     candidate = read_png(candidate_path, "candidate")
     candidate_sidecar = read_sidecar(candidate_path)
+    candidate_labels = read_labels(candidate_path, candidate)
 
     def candidate_gl() -> GoldenSidecar | None:
         # asked only when it can matter: starting a GL context to ask takes seconds
         return candidate_sidecar or (this_machine() if this_machine is not None else None)
 
     if update and not golden_path.exists():
-        write_golden(golden_path, candidate, candidate_gl() or GoldenSidecar())
+        write_golden(golden_path, candidate, candidate_gl() or GoldenSidecar(), candidate_labels)
         return ImgdiffOutcome(0, f"created golden {golden_path} and {sidecar_path(golden_path)} from {candidate_path}",
                               None, None)
     try:
         golden = read_png(golden_path, "golden")
         golden_sidecar = read_sidecar(golden_path)
+        golden_labels = read_labels(golden_path, golden)
         known = golden_sidecar is not None and golden_sidecar.gl_renderer and golden_sidecar.mesa_version
-        comparison = compare_images(golden, candidate, golden_sidecar,
-                                    candidate_gl() if known or update else candidate_sidecar, tolerance,
-                                    names=(str(golden_path), str(candidate_path)))
+        comparison, explanation, mask = compare_labelled(
+            golden, candidate, golden_sidecar, candidate_gl() if known or update else candidate_sidecar, tolerance,
+            (str(golden_path), str(candidate_path)), golden_labels, candidate_labels, ignore, max_shift_px)
     except ImageInputError as err:
         if not update:
             raise
-        write_golden(golden_path, candidate, candidate_gl() or GoldenSidecar())
+        write_golden(golden_path, candidate, candidate_gl() or GoldenSidecar(), candidate_labels)
         return ImgdiffOutcome(0, f"updated golden {golden_path} and {sidecar_path(golden_path)} from {candidate_path} "
                                  f"(the old one was unusable: {err.problem})", None, None)
     written = None
     if diff_path is not None or not comparison.matched:
-        written = write_diff_image(diff_path or default_diff_path(candidate_path), golden, candidate, comparison)
+        written = write_diff_image(diff_path or default_diff_path(candidate_path), golden, candidate, comparison, mask)
+        if explanation is not None:  # what changed, for a machine, beside the diff image (DIFF.json)
+            write_json(written.with_suffix(".json"), {"summary": comparison.summary(), **explanation.to_json()})
     line = comparison.summary() + (f" -> {written}" if written else "")
     if update:
-        write_golden(golden_path, candidate, candidate_gl() or GoldenSidecar())
+        write_golden(golden_path, candidate, candidate_gl() or GoldenSidecar(), candidate_labels)
         return ImgdiffOutcome(0, f"updated golden {golden_path} and {sidecar_path(golden_path)} from {candidate_path} "
-                                 f"(it was: {line})", comparison, written)
-    return ImgdiffOutcome(0 if comparison.matched else 1, line, comparison, written)
+                                 f"(it was: {line})", comparison, written, explanation)
+    return ImgdiffOutcome(0 if comparison.matched else 1, line, comparison, written, explanation)

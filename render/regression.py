@@ -32,10 +32,12 @@ DEFAULT_SIZE = (320, 240)
 
 @dataclass(frozen=True, eq=False)
 class RenderedFrame:
-    """A rendered image, (h, w, 3) uint8 RGB, and what identifies it (`sidecar`); usable as an array."""
+    """A rendered image, (h, w, 3) uint8 RGB, what identifies it (`sidecar`) and what each pixel shows
+    (`labels`, an `orthosim_render.labels.LabelFrame`, or None); usable as an array."""
 
     image: np.ndarray
     sidecar: GoldenSidecar
+    labels: object | None = None
 
     def __array__(self, dtype=None, copy=None):
         return self.image if dtype is None else self.image.astype(dtype)
@@ -75,13 +77,21 @@ def this_machine_gl() -> GoldenSidecar | None:
 
 
 def render_state(dentition, state, view: str = "frontal", size: tuple[int, int] = DEFAULT_SIZE, *,
-                 hide_roots: bool = False, contact_faces: bool = False) -> np.ndarray:
-    """(h, w, 3) uint8: `state` (a `orthosim_render.frame_state.FrameState`) of `dentition` from preset `view`."""
+                 hide_roots: bool = False, contact_faces: bool = False, labels: bool = False):
+    """(h, w, 3) uint8: `state` (a `orthosim_render.frame_state.FrameState`) of `dentition` from preset `view`.
+
+    `labels=True`: (image, its `LabelFrame`), drawn in the same pass (the image is the same).
+    """
     from orthosim_render.scene import DentitionScene
 
     scene = DentitionScene(dentition, size, hide_roots=hide_roots, color_contact_faces=contact_faces)
     scene.update(state)
-    return _renderer((int(size[0]), int(size[1]))).render(scene, view)
+    renderer = _renderer((int(size[0]), int(size[1])))
+    if labels:
+        from orthosim_render.labels import render_labelled
+
+        return render_labelled(renderer, scene, view)
+    return renderer.render(scene, view)
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,12 +148,14 @@ def simulate_case_once(case_file: str | Path, detector: str | None = None, steps
 
 def render_case_frame(case_file: str | Path, step: int = -1, view: str = "frontal",
                       size: tuple[int, int] = DEFAULT_SIZE, *, detector: str | None = None, contacts: bool = True,
-                      hide_roots: bool = False, contact_faces: bool = False) -> RenderedFrame:
+                      hide_roots: bool = False, contact_faces: bool = False, labels: bool = True) -> RenderedFrame:
     """Simulation step `step` of the case (-1: its last) from camera preset `view`, at `size` (w, h) px.
 
     Contact markers are drawn (`contacts=False` leaves them out); `detector` defaults to the case's.
     The frame's sidecar names this machine's GL renderer and Mesa version, the size, view, case
-    file name and SHA-256 and the step, as `orthosim imgdiff` and the pytest fixture expect.
+    file name and SHA-256 and the step, as `orthosim imgdiff` and the pytest fixture expect. With
+    `labels` (the default) the frame also carries what each pixel shows (`orthosim_render.labels`),
+    drawn in the same pass, so that a failing check can say which tooth changed and how.
     """
     from orthosim_render.cameras import check_view
 
@@ -157,9 +169,11 @@ def render_case_frame(case_file: str | Path, step: int = -1, view: str = "fronta
         steps = min(step, load_case(case_file).steps)
     run = simulate_case_once(case_file, detector, steps)
     state = run.state(step, contacts)
-    image = render_state(run.dentition, state, view, size, hide_roots=hide_roots, contact_faces=contact_faces)
+    image = render_state(run.dentition, state, view, size, hide_roots=hide_roots, contact_faces=contact_faces,
+                         labels=labels)
+    image, label_frame = image if labels else (image, None)
     gl = gl_identity()
     sidecar = GoldenSidecar(gl_renderer=gl.gl_renderer, mesa_version=gl.mesa_version, size=(int(size[0]), int(size[1])),
                             view=view, orthosim_version=__version__, case_file=run.case_file.name,
                             case_sha256=run.case_sha256, frame_index=state.step)
-    return RenderedFrame(image, sidecar)
+    return RenderedFrame(image, sidecar, label_frame)

@@ -52,6 +52,7 @@ def _lean_renderer_class(pyrender, GL):
             self.cache_name = None
             self.cache_hits = self.cache_builds = 0
             self.read_channels = 3  # 4 for RGBA output, set by Renderer
+            self.label_ids = None  # node -> label id while a frame is drawn with its label target
             self._shader_files = ("gouraud.vert", "gouraud.frag") if lighting == "vertex" else ("mesh.vert", "mesh.frag")
 
         def _program_for(self, primitive, n_lights: int):
@@ -67,6 +68,8 @@ def _lean_renderer_class(pyrender, GL):
                     loc += 1
             defines["INST_M_LOC"] = loc
             defines["MAX_DIRECTIONAL_LIGHTS"] = max(n_lights, 1)
+            if self.label_ids is not None:
+                defines["LABEL_TARGET"] = 1
             program = self._program_cache.get_program(*self._shader_files, defines=defines)
             if not program._in_context():
                 program._add_to_context()
@@ -81,8 +84,10 @@ def _lean_renderer_class(pyrender, GL):
             return loc
 
         def _draw_sprites(self, sprites, VP) -> None:
-            program = self._program_cache.get_program("marker.vert", "marker.frag",
-                                                      defines={"TEXCOORD_0_LOC": 1, "INST_M_LOC": 2})
+            defines = {"TEXCOORD_0_LOC": 1, "INST_M_LOC": 2}
+            if self.label_ids is not None:
+                defines["LABEL_TARGET"] = 1
+            program = self._program_cache.get_program("marker.vert", "marker.frag", defines=defines)
             if not program._in_context():
                 program._add_to_context()
             program._bind()
@@ -117,7 +122,7 @@ def _lean_renderer_class(pyrender, GL):
             return fbo
 
         def drop_caches(self, keep_scene) -> None:
-            for name in [n for n in self._fbos if n != "work" and n[1][0] != keep_scene]:
+            for name in [n for n in self._fbos if n not in ("work", "labels", "labels_target") and n[1][0] != keep_scene]:
                 fb, cb, db = self._fbos.pop(name)
                 GL.glDeleteFramebuffers(1, [fb])
                 GL.glDeleteRenderbuffers(2, [cb, db])
@@ -126,8 +131,10 @@ def _lean_renderer_class(pyrender, GL):
 
         def delete_fbos(self):
             for fb, cb, db in self._fbos.values():
-                GL.glDeleteFramebuffers(1, [fb])
-                GL.glDeleteRenderbuffers(2, [cb, db])
+                if fb:
+                    GL.glDeleteFramebuffers(1, [fb])
+                buffers = [b for b in (cb, db) if b]  # the label target is a colour buffer alone
+                GL.glDeleteRenderbuffers(len(buffers), buffers)
             self._fbos.clear()
             self._cache_keys.clear()
 
@@ -171,15 +178,15 @@ def _lean_renderer_class(pyrender, GL):
                     if primitive.mode == pyrender.GLTF.POINTS:
                         sprites.append((primitive, M))  # after the opaque surfaces they sit on
                     elif primitive.material.alphaMode == "BLEND":
-                        translucent.append((primitive, M))  # over everything opaque, seen through
+                        translucent.append((node, primitive, M))  # over everything opaque, seen through
                     else:
-                        self._draw_primitive(scene, primitive, M, VP, cam_pos, lights, bound)
+                        self._draw_primitive(scene, node, primitive, M, VP, cam_pos, lights, bound)
             if translucent:
                 GL.glEnable(GL.GL_BLEND)
                 GL.glBlendFunc(GL.GL_SRC_ALPHA, GL.GL_ONE_MINUS_SRC_ALPHA)
                 GL.glDepthMask(GL.GL_FALSE)
-                for primitive, M in translucent:
-                    self._draw_primitive(scene, primitive, M, VP, cam_pos, lights, bound)
+                for node, primitive, M in translucent:
+                    self._draw_primitive(scene, node, primitive, M, VP, cam_pos, lights, bound)
                 GL.glDepthMask(GL.GL_TRUE)
                 GL.glDisable(GL.GL_BLEND)
             if sprites:
@@ -187,8 +194,9 @@ def _lean_renderer_class(pyrender, GL):
             GL.glBindVertexArray(0)
             GL.glUseProgram(0)
 
-        def _draw_primitive(self, scene, primitive, M, VP, cam_pos, lights, bound: dict) -> None:
-            """One surface primitive at model matrix `M`; `bound` keeps the bound program and culling across calls."""
+        def _draw_primitive(self, scene, node, primitive, M, VP, cam_pos, lights, bound: dict) -> None:
+            """One surface primitive of `node` at model matrix `M`; `bound` keeps the bound program and culling
+            across calls."""
             program = self._program_for(primitive, len(lights))
             if program is not bound["program"]:
                 program._bind()
@@ -211,6 +219,9 @@ def _lean_renderer_class(pyrender, GL):
             GL.glUniform3fv(self._loc(program, "material.emissive_factor"), 1,
                             np.asarray(material.emissiveFactor, np.float32))
             GL.glUniform1f(self._loc(program, "material.roughness_factor"), float(material.roughnessFactor))
+            if self.label_ids is not None:
+                label = self.label_ids.get(node, 0)
+                GL.glUniform2f(self._loc(program, "label_rg"), (label % 256) / 255.0, (label // 256) / 255.0)
             want_cull = not material.doubleSided
             if want_cull != bound["cull"]:
                 (GL.glEnable if want_cull else GL.glDisable)(GL.GL_CULL_FACE)
@@ -245,6 +256,8 @@ def _lean_renderer_class(pyrender, GL):
                 GL.glFlush()
                 return self._read_main_framebuffer(scene, flags)
 
+            if self.label_ids is not None:
+                return self._labelled_pass(scene, nodes, VP, cam_pos, lights)
             work = self._fbo("work")[0]
             key = self.static_key
             view = self.cache_name
@@ -280,6 +293,39 @@ def _lean_renderer_class(pyrender, GL):
                             image)
             GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
             return image
+
+        def _labelled_pass(self, scene, nodes, VP, cam_pos, lights):
+            """One full draw into colour + label targets; (colour, labels (h, w) uint16, depth (h, w) float32)."""
+            fb = self._fbo("labels")[0]
+            if self._fbos.get("labels_target") is None:
+                w, h = self.viewport_width, self.viewport_height
+                rb = GL.glGenRenderbuffers(1)
+                GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, rb)
+                GL.glRenderbufferStorage(GL.GL_RENDERBUFFER, GL.GL_RGBA8, w, h)
+                GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, fb)
+                GL.glFramebufferRenderbuffer(GL.GL_FRAMEBUFFER, GL.GL_COLOR_ATTACHMENT1, GL.GL_RENDERBUFFER, rb)
+                self._fbos["labels_target"] = (0, rb, 0)
+            self._begin(fb)
+            GL.glDrawBuffers(2, [GL.GL_COLOR_ATTACHMENT0, GL.GL_COLOR_ATTACHMENT1])
+            GL.glClearBufferfv(GL.GL_COLOR, 0, np.asarray(scene.bg_color, np.float32))
+            GL.glClearBufferfv(GL.GL_COLOR, 1, np.zeros(4, np.float32))
+            GL.glClearBufferfv(GL.GL_DEPTH, 0, np.ones(1, np.float32))
+            self._draw(scene, nodes, VP, cam_pos, lights)
+            w, h = self.viewport_width, self.viewport_height
+            GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, fb)
+            GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 1)
+            image = np.empty((h, w, self.read_channels), np.uint8)
+            GL.glReadBuffer(GL.GL_COLOR_ATTACHMENT0)
+            GL.glReadPixels(0, 0, w, h, GL.GL_RGBA if self.read_channels == 4 else GL.GL_RGB, GL.GL_UNSIGNED_BYTE, image)
+            rg = np.empty((h, w, 4), np.uint8)
+            GL.glReadBuffer(GL.GL_COLOR_ATTACHMENT1)
+            GL.glReadPixels(0, 0, w, h, GL.GL_RGBA, GL.GL_UNSIGNED_BYTE, rg)
+            depth = np.empty((h, w), np.float32)
+            GL.glReadPixels(0, 0, w, h, GL.GL_DEPTH_COMPONENT, GL.GL_FLOAT, depth)
+            GL.glReadBuffer(GL.GL_COLOR_ATTACHMENT0)
+            GL.glDrawBuffers(1, [GL.GL_COLOR_ATTACHMENT0])
+            GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+            return image, rg[:, :, 0].astype(np.uint16) | (rg[:, :, 1].astype(np.uint16) << 8), depth
 
     return LeanRenderer
 
@@ -364,6 +410,30 @@ class Renderer:
         if self.alpha:
             return np.ascontiguousarray(rgba)
         return np.ascontiguousarray(rgba[:, :, :3])
+
+    def render_labelled(self, scene, node_labels: dict, view: str | None = None):
+        """Draw `scene` as `render` does and, in the same pass, what each pixel shows (semantic goldens,
+        `orthosim_render.labels`): returns (image as `render` returns it, labels (h, w) uint16, depth
+        (h, w) float32 window depth in [0, 1], 1.0 where nothing is drawn), top row first.
+
+        `node_labels`: pyrender node -> label id (1-65535); contact sprites carry their own ids in
+        their texture coordinate's second component. The colour image is the one `render` draws (the
+        label target is a second output of the same shaders). Lean renderers without multisampling only.
+        """
+        if not self.lean or self.msaa or self.lighting != "vertex":
+            raise ValueError("the label target needs the lean forward pass, vertex lighting and no multisampling")
+        if view is not None and (scene.current_view is None or scene.current_view.name != view):
+            scene.set_view(view)
+        self._platform.make_current()
+        self._sync_buffers(scene)
+        self._mark_static(scene)
+        self._inner.label_ids = node_labels
+        try:
+            image, labels, depth = self._inner.render(scene.scene, self._flags)
+        finally:
+            self._inner.label_ids = None
+        self.frames += 1
+        return image, labels, depth
 
     def _mark_static(self, scene) -> None:
         """Tell the forward pass which teeth can come from its cached image, and under what key.

@@ -13,6 +13,17 @@ from orthosim.exchange.shareddata import OPEN_FULL_JAW, shared_data_dir
 
 _REAL_DATA = shared_data_dir() / OPEN_FULL_JAW
 _outcomes: dict[str, str] = {}
+_damaged_entries: dict[str, int] = {}  # kind of cache entry -> damaged copies a test loaded (tests/test_damaged_entries.py)
+
+
+@pytest.fixture
+def damage_tally(request) -> dict[str, int]:
+    """Where a test counts the damaged files it tried; the run's summary prints the counts. They
+    travel with the test's teardown report (its user properties), so pytest-xdist's controller,
+    which prints the summary, receives them from its workers."""
+    tally: dict[str, int] = {}
+    yield tally
+    request.node.user_properties.append(("damaged_entries", dict(tally)))
 
 
 def pytest_runtest_setup(item):
@@ -20,18 +31,25 @@ def pytest_runtest_setup(item):
         pytest.skip(f"real-tooth data not found at {_REAL_DATA} (set ORTHOSIM_SHARED_DATA or put shared/ beside the repository)")
 
 
-@pytest.hookimpl(hookwrapper=True)
-def pytest_runtest_makereport(item, call):
-    outcome = yield
-    report = outcome.get_result()
-    if item.get_closest_marker("real_data") and (report.when == "call" or report.skipped):
+def pytest_runtest_logreport(report):
+    """Counted from the reports (in the one process, or in pytest-xdist's controller, which receives
+    every worker's reports with their markers among the keywords)."""
+    if report.when == "teardown":
+        for name, tally in report.user_properties:
+            if name == "damaged_entries":
+                for kind, n in tally.items():
+                    _damaged_entries[kind] = _damaged_entries.get(kind, 0) + n
+    if "real_data" in report.keywords and (report.when == "call" or report.skipped):
         if hasattr(report, "wasxfail"):  # a known failure that ran (pytest reports it as skipped)
-            _outcomes[item.nodeid] = "xfailed" if report.skipped else "passed"
+            _outcomes[report.nodeid] = "xfailed" if report.skipped else "passed"
         else:
-            _outcomes[item.nodeid] = "skipped" if report.skipped else ("failed" if report.failed else "passed")
+            _outcomes[report.nodeid] = "skipped" if report.skipped else ("failed" if report.failed else "passed")
 
 
 def pytest_terminal_summary(terminalreporter):
     ran = sum(v != "skipped" for v in _outcomes.values())
     skipped = sum(v == "skipped" for v in _outcomes.values())
     terminalreporter.write_line(f"real-data tests ({_REAL_DATA}): {ran} ran, {skipped} skipped")
+    if _damaged_entries:
+        tried = ", ".join(f"{kind} {n}" for kind, n in sorted(_damaged_entries.items()))
+        terminalreporter.write_line(f"damaged cache entries tried: {sum(_damaged_entries.values())} ({tried})")

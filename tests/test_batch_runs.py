@@ -126,11 +126,11 @@ def test_failing_runs_are_recorded_and_the_batch_goes_on(case_file, tmp_path):
     vs = variants(case_file, "loads.0.force_cN=100,150,200,250")
     crashing, hanging = vs[0].run_id, vs[2].run_id
     # the limit leaves a good run (imports, model, frames) room even on a heavily loaded machine
-    opts = BatchOptions(workers=2, run_timeout_s=240, render_opts={**H.RENDER, "fail_runs": [crashing, hanging]},
+    opts = BatchOptions(workers=2, run_timeout_s=60, render_opts={**H.RENDER, "fail_runs": [crashing, hanging]},
                         progress=False)
     rows = {r.run_id: r for r in run_batch(vs, tmp_path, H.hang_or_crash, opts)}
     assert rows[crashing].status == "failed" and rows[crashing].error == "RuntimeError: simulated crash in the renderer"
-    assert rows[hanging].status == "failed" and rows[hanging].error == "stopped after 240 s (--run-timeout)"
+    assert rows[hanging].status == "failed" and rows[hanging].error == "stopped after 60 s (--run-timeout)"
     for ok in (vs[1].run_id, vs[3].run_id):
         assert rows[ok].status == "ok", rows[ok].error
         read_finished_run(tmp_path / ok)

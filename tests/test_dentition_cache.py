@@ -125,27 +125,34 @@ def test_a_cases_diastema_is_part_of_its_cached_model_not_served_from_the_same_t
 
 def test_every_module_the_builders_import_is_part_of_the_cache_key():
     """A dentition built by code the key does not cover would be served stale after that code changes:
-    every orthosim module a builder module imports (relative imports, at any depth in the file) is a
-    builder module too, but for those that hold no geometry (errors, the cache itself) and the
-    detector package, whose broad phase only lists candidate pairs."""
+    every orthosim module a builder module imports (at any depth in the file) is a builder module
+    too, but for those that hold no geometry (errors, storage, the cache itself) and the collision
+    package, whose broad phase only lists candidate pairs."""
     import ast
 
     from pathlib import Path
 
     from orthosim.model import dentition_cache
 
-    package = Path(dentition_cache.__file__).resolve().parent
+    package = Path(dentition_cache.__file__).resolve().parents[1]  # orthosim/
     keyed = set(dentition_cache._BUILDER_MODULES)
-    missing = set()
+    exempt = ("errors", "collision", "storage", "model/dentition_cache")
+
+    def module_path(dotted: str) -> str | None:
+        """orthosim.a.b -> "a/b" when that is a module file of the package (a package: None)."""
+        rel = dotted.split(".")[1:]
+        return "/".join(rel) if rel and (package / Path(*rel)).with_suffix(".py").is_file() else None
+
+    missing, seen = set(), 0
     for name in keyed:
         tree = ast.parse((package / f"{name}.py").read_text())
         for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
-                mod = node.module.replace(".", "/")
-                if (package / mod).is_dir():  # from .package import module
-                    mods = [f"{mod}/{a.name}" for a in node.names]
-                else:
-                    mods = [mod]
-                missing.update(f"{name} imports {m}" for m in mods
-                               if m not in keyed and m.split("/")[0] not in ("errors", "collision", "dentition_cache"))
+            if not (isinstance(node, ast.ImportFrom) and node.level == 0 and (node.module or "").startswith("orthosim")):
+                continue
+            mods = [module_path(f"{node.module}.{a.name}") or module_path(node.module) for a in node.names]
+            for m in filter(None, mods):
+                seen += 1
+                if m not in keyed and not any(m == e or m.startswith(e + "/") for e in exempt):
+                    missing.add(f"{name} imports {m}")
+    assert seen > 20  # the builders do import one another: the walk found them
     assert not missing, sorted(missing)

@@ -1,6 +1,7 @@
 """Upper-versus-lower contacts on the real bite stop a tooth moved into the other arch in any
 direction, while cusps in contact at rest may slide (the occlusal rule, README "Occlusion"), and
-the scan's own interpenetration is the rest state, not a collision."""
+the scan's own interpenetration is the rest state, not a collision. These runs set `[occlusion]
+closure = "none"`: the rule without the bite's closure, which real-jaw cases use by default."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import numpy as np
 import pytest
 
 from fulljaw_helpers import full_jaw
-from orthosim.exchange.case import Load, load_case
+from orthosim.exchange.case import Load, Occlusion, load_case
 from orthosim.collision import ExactQueries
 from orthosim.movement import MovementModel, simulate
 
@@ -21,7 +22,9 @@ CASE = Path(__file__).resolve().parent.parent / "cases" / "open_full_jaw_patient
 
 @lru_cache(maxsize=6)
 def _run(loads: tuple, steps: int, extractions: tuple = ()):
-    case = replace(load_case(CASE), loads=loads, step_days=10.0, duration_days=10.0 * steps, extractions=extractions)
+    # the slide allowance's own rule: the bite's closure (tests/test_closure.py) off
+    case = replace(load_case(CASE), loads=loads, step_days=10.0, duration_days=10.0 * steps, extractions=extractions,
+                   occlusion=Occlusion(closure="none"))
     model = MovementModel.build(case, dentition=full_jaw()[0])
     return model, list(simulate(model, "continuous"))
 

@@ -76,7 +76,7 @@ def test_a_dense_tooth_in_a_case_is_simplified_to_the_case_budget_and_cached_und
 
 
 @pytest.mark.parametrize("value,why", [("500", "at least 10,000"), ("2.5e4", "whole number"), ("true", "whole number"),
-                                      ('"many"', "whole number")])
+                                      ('"many"', "whole number"), ("100000000", "at most 2,000,000")])
 def test_a_bad_triangle_budget_is_one_line_naming_the_field(tmp_path, value, why):
     case = _mesh_case(tmp_path, f"max_triangles_per_tooth = {value}", dense=0)
     with pytest.raises(CaseError, match=f"max_triangles_per_tooth.*{why}"):

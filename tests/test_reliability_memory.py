@@ -33,6 +33,7 @@ def test_peak_memory_sums_the_whole_process_tree_and_not_the_measuring_process()
     assert 240 <= peak.tree_rss_sampled_peak_mb < 360  # both at once, without the 400 MB here
     assert peak.peak_mb >= peak.largest_process_peak_mb
     assert 240 <= peak.peak_mb < 360  # two processes' own pages: the headline counts both
+    assert 240 <= peak.tree_private_dirty_peak_mb < 360  # written by each: private to each
 
 
 # a child that holds 150 MB, then forks: the forked copy shares those pages until it writes them
@@ -60,6 +61,7 @@ def test_pages_a_forked_child_shares_with_its_parent_count_once_in_the_headline_
         assert peak.peak_measure == "unique pages"
         assert 150 <= peak.tree_unique_sampled_peak_mb < 250
     assert peak.peak_mb < 250
+    assert 140 <= peak.tree_private_dirty_peak_mb < 250  # the parent's before the fork; once shared, never twice
 
 
 def test_a_run_past_its_time_limit_is_killed_and_says_so():
@@ -76,7 +78,8 @@ def test_the_bench_record_measures_a_long_run_and_a_drawn_run_in_child_processes
     for key in ("run_10k_steps_no_render_mb", "render_2000_frames_mb", "render_2000_frames_rss_mb",
                 "render_2000_frames_pss_mb"):
         assert 50 < record[key] < 5000  # an interpreter with numpy, trimesh, FCL: tens of MB at least
-    assert record["render_2000_frames_mb"] < record["render_2000_frames_rss_mb"]  # the fork's shared pages once
+    assert record["render_2000_frames_resident_mb"] < record["render_2000_frames_rss_mb"]  # the fork's shared pages once
+    assert record["render_2000_frames_mb"] <= record["render_2000_frames_uss_mb"] <= record["render_2000_frames_rss_mb"]
     assert record["target_mb"] == TARGET_MB
     assert record["meets_target"]["run_10k_steps_no_render"] == (record["run_10k_steps_no_render_mb"] < TARGET_MB)
     assert list(tmp_path.iterdir()) == []  # the runs' folders are removed

@@ -160,7 +160,7 @@ def test_the_pdf_has_one_section_per_case(report_dir, report):
         assert "Occlusal contact areas" in texts[start] and "Throughput" in "".join(texts[start:])
 
 
-def test_report_refuses_an_unfinished_run_and_one_from_another_version(report_dir, report, tmp_path):
+def test_report_refuses_an_unfinished_run_one_from_another_version_and_a_damaged_one(report_dir, report, tmp_path):
     run = Path(report["cases"][0]["runs"]["continuous"]["run_dir"])
     unfinished = tmp_path / "unfinished"
     shutil.copytree(run, unfinished)
@@ -173,7 +173,14 @@ def test_report_refuses_an_unfinished_run_and_one_from_another_version(report_di
     (foreign / "run.json").write_text(json.dumps({**record, "orthosim_version": "0.0.1"}))
     r = orthosim("report", "--from-runs", str(foreign), "--out", str(tmp_path / "r2"))
     assert r.returncode == 2 and "orthosim_version" in r.stderr and r.stderr.count("\n") == 1
-    assert not (tmp_path / "r1" / "index.html").exists() and not (tmp_path / "r2" / "index.html").exists()
+    damaged = tmp_path / "damaged"  # one pose in steps.jsonl changed by a bit: refused, never drawn silently
+    shutil.copytree(run, damaged)
+    steps = bytearray((damaged / "steps.jsonl").read_bytes())
+    steps[len(steps) // 2] ^= 0x01
+    (damaged / "steps.jsonl").write_bytes(bytes(steps))
+    r = orthosim("report", "--from-runs", str(damaged), "--out", str(tmp_path / "r3"))
+    assert r.returncode == 2 and "steps.jsonl" in r.stderr and "is damaged" in r.stderr and r.stderr.count("\n") == 1
+    assert not any((tmp_path / d / "index.html").exists() for d in ("r1", "r2", "r3"))
 
 
 def test_report_from_runs_gives_the_same_figures(report_dir, report, tmp_path):

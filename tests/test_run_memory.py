@@ -1,17 +1,14 @@
 """What keeps a drawn run's memory down (issue 12): each process forgets what it no longer reads.
 
 The simulation side drops the teeth meshes' trimesh caches once its model is built, the drawing
-side once its scene is; an LLVM's code pages are handed back once it has compiled; the drawing
+side once its scene is; the drawing
 process reads step records without importing the simulation's modules (numba, the collision package).
 """
 
 from __future__ import annotations
 
-import ctypes
 import os
 import pickle
-import re
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -19,75 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orthosim.runtime.background import release_compiler_pages
 from orthosim.exchange.case import load_case
 from orthosim.movement.records import CollisionEvent, StepRecord
 
 ROOT = Path(__file__).resolve().parent.parent
 CASE = ROOT / "cases" / "case3_incisor_space_closure.toml"
-
-
-def _resident_kb(path_end: str) -> int:
-    """kB of this process's resident pages in the mappings of the file whose path ends with `path_end`."""
-    total, inside = 0, False
-    with open("/proc/self/smaps") as smaps:
-        for line in smaps:
-            fields = line.split()
-            if fields and "-" in fields[0] and len(fields) >= 5 and not fields[0].endswith(":"):
-                inside = len(fields) >= 6 and fields[-1].endswith(path_end)
-            elif inside and fields[0] == "Rss:":
-                total += int(fields[1])
-    return total
-
-
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="madvise and /proc: Linux")
-def test_a_compiler_librarys_resident_code_pages_are_handed_back_and_read_again_the_same(tmp_path):
-    import _ctypes
-
-    lib = tmp_path / "liborthosimtestcompiler.so"
-    shutil.copyfile(_ctypes.__file__, lib)
-    handle = ctypes.CDLL(str(lib))
-    spans = []
-    with open("/proc/self/maps") as maps:
-        for line in maps:
-            parts = line.split(None, 5)
-            if len(parts) == 6 and parts[5].rstrip() == str(lib) and "w" not in parts[1]:
-                spans.append(tuple(int(x, 16) for x in parts[0].split("-")))
-    content = [ctypes.string_at(lo, hi - lo) for lo, hi in spans]  # every read-only page touched
-    before = _resident_kb(lib.name)
-    assert before >= 0.9 * sum(hi - lo for lo, hi in spans) / 1024
-
-    released = release_compiler_pages(re.compile(re.escape(lib.name)))
-    after = _resident_kb(lib.name)
-    assert after <= before / 4
-    assert released >= (before - after) * 1024 * 0.9
-    assert release_compiler_pages(re.compile("^no-such-library")) == 0
-    assert [ctypes.string_at(lo, hi - lo) for lo, hi in spans] == content  # read again: the same bytes
-    del handle
-
-
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="madvise and /proc: Linux")
-def test_pages_a_process_has_written_in_a_read_only_mapping_are_kept(tmp_path):
-    # like a library's relocated data, made read-only after loading: the page is this process's copy,
-    # not the file's, and must keep what was written into it
-    import mmap
-
-    path = tmp_path / "liborthosimtestwritten.so"
-    path.write_bytes(bytes(4 * mmap.PAGESIZE))
-    with open(path, "r+b") as f:
-        m = mmap.mmap(f.fileno(), 4 * mmap.PAGESIZE, flags=mmap.MAP_PRIVATE, prot=mmap.PROT_READ | mmap.PROT_WRITE)
-    m[mmap.PAGESIZE:mmap.PAGESIZE + 5] = b"moved"  # page 1: copied on write
-    _ = m[3 * mmap.PAGESIZE]  # page 3: the file's, resident
-    address = ctypes.addressof(ctypes.c_char.from_buffer(m))
-    libc = ctypes.CDLL(None, use_errno=True)
-    libc.mprotect.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
-    assert libc.mprotect(address, 4 * mmap.PAGESIZE, mmap.PROT_READ) == 0
-    released = release_compiler_pages(re.compile(re.escape(path.name)))
-    assert released >= mmap.PAGESIZE  # the file's page
-    assert ctypes.string_at(address + mmap.PAGESIZE, 5) == b"moved"
-    assert ctypes.string_at(address + 3 * mmap.PAGESIZE, 5) == bytes(5)
-    assert libc.mprotect(address, 4 * mmap.PAGESIZE, mmap.PROT_READ | mmap.PROT_WRITE) == 0
-    m.close()
 
 
 def test_dropping_the_mesh_caches_forgets_derived_arrays_and_they_come_back_the_same():

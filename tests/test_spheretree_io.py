@@ -10,7 +10,7 @@ import trimesh
 
 from orthosim.errors import SphereTreeError
 from orthosim.spheretree import SphereTree, build_sphere_tree, cached_sphere_tree, cached_sphere_trees, read_sph, write_sph
-from orthosim.spheretree.cache import cache_key, load_tree, save_tree
+from orthosim.spheretree.cache import cache_key, load_tree, store_entry
 
 
 def _mesh() -> trimesh.Trimesh:
@@ -85,12 +85,12 @@ def test_cache_returns_the_identical_tree(tmp_path):
     _same(first, second)
     np.testing.assert_array_equal(first.leaf_of_face, second.leaf_of_face)
     assert second.method == "fit"
-    # The second call really reads the file: a tree planted under the key is what comes back.
-    # (planted in the stored orientation: a capsule's entry may hold its mirror image's tree)
+    # The second call really reads the file: a tree planted under the key (with its checksum) is what
+    # comes back. (planted in the stored orientation: a capsule's entry may hold its mirror image's tree)
     stored = load_tree(files[0])
     planted = SphereTree(stored.branching, stored.centers, tuple(r * 2 for r in stored.radii), stored.parents,
                          stored.leaf_of_face, "planted")
-    save_tree(planted, files[0])
+    store_entry(planted, files[0])
     third = cached_sphere_tree(mesh, cache_dir=tmp_path)
     assert third.method == "planted"
     np.testing.assert_array_equal(third.leaf_radii, 2 * first.leaf_radii)

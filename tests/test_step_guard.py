@@ -35,7 +35,10 @@ REGEN = os.environ.get("ORTHOSIM_REGEN_STEP_GUARD") == "1"
 PARAMETRIC_STEPS = 20  # at most: the paper's cases whole (their collisions come from step 2 to 19)
 REAL_STEPS = 2  # a real jaw's step costs seconds
 PARAMETRIC = ("case1_first_premolar_extraction", "case2_second_premolar_extraction",
-              "case3_incisor_space_closure", "normal_occlusion")
+              "case3_incisor_space_closure", "normal_occlusion",
+              # the evidence table's treatments (issue 33), on the clinical rate law
+              "canine_retraction_upper", "canine_retraction_upper_reinforced", "canine_retraction_lower",
+              "canine_retraction_lower_reinforced", "en_masse_retraction")
 REAL = ("open_full_jaw_case1_first_premolar_extraction", "open_full_jaw_case2_second_premolar_extraction",
         "open_full_jaw_case3_diastema", "open_full_jaw_patient26")
 
@@ -64,10 +67,15 @@ def canonical(x) -> str:
     raise TypeError(f"no canonical form for {type(x).__name__}")
 
 
+# fields added to StepRecord after digests were stored, left out where a run leaves them None (a
+# run without the bite's closure has no `bite`), so that records which did not change keep their digests
+LATER_FIELDS = ("bite",)
+
+
 def digests(record) -> dict[str, str]:
     """field name -> sha256 (first 16 hex digits) of its canonical form, for one StepRecord."""
     return {f.name: hashlib.sha256(canonical(getattr(record, f.name)).encode()).hexdigest()[:16]
-            for f in dataclasses.fields(record)}
+            for f in dataclasses.fields(record) if not (f.name in LATER_FIELDS and getattr(record, f.name) is None)}
 
 
 _models: dict[str, MovementModel] = {}

@@ -14,6 +14,7 @@ processing that long, its task cancelled, and its worker restarted to stop the w
 
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 import uuid
@@ -46,6 +47,7 @@ def write_shipped_run(run_dir: Path, files: dict[str, bytes]) -> None:
     """Write a run's files into run_dir, each atomically, run.json last (it marks the run finished),
     its case path pointing at run_dir/case.toml (the same bytes the worker ran)."""
     record = files.get(RUN_FILE)
+    rewritten = {}
     for name, data in files.items():
         if name == RUN_FILE:
             continue
@@ -54,10 +56,13 @@ def write_shipped_run(run_dir: Path, files: dict[str, bytes]) -> None:
             if "case_file" in metrics:
                 metrics["case_file"] = str(run_dir / "case.toml")
                 data = (json.dumps(metrics, indent=2) + "\n").encode()
+                rewritten[name] = hashlib.sha256(data).hexdigest()
         write_bytes(run_dir / name, data)
     if record is not None:
         run = json.loads(record)
         run["case_file"] = str(run_dir / "case.toml")
+        if isinstance(run.get("output_sha256"), dict):  # the checksum of what this side wrote (runfolder.read_finished_run)
+            run["output_sha256"].update((k, v) for k, v in rewritten.items() if k in run["output_sha256"])
         write_bytes(run_dir / RUN_FILE, (json.dumps(run, indent=2) + "\n").encode())
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -23,6 +24,10 @@ from orthosim.runtime.runfolder import RUN_FILE, RunFolderError, read_finished_r
 from orthosim.batch.plan import Variant
 
 OK, FAILED, PENDING = "ok", "failed", "pending"
+
+
+class DamagedRunWarning(UserWarning):
+    """A run folder a batch finished earlier is damaged or foreign; the batch runs it again."""
 MEASURES = ("steps", "collisions", "max_penetration_mm", "total_distance_initial_mm", "total_distance_final_mm",
             "frames", "fps", "wall_s")
 
@@ -79,12 +84,15 @@ def run_summary(summary: dict) -> dict:
 def finished_summary(run_dir: Path, variant: Variant) -> dict | None:
     """The summary of a run folder finished earlier for exactly this variant, else None (to be run).
 
-    Finished means `read_finished_run` accepts it and its run.json names this variant's case text
-    (SHA-256) and detector: a folder left by a different sweep under the same id is run again.
+    Finished means `read_finished_run` accepts it (run.json and the checksums of the run's files) and
+    its run.json names this variant's case text (SHA-256) and detector: a folder left by a different
+    sweep under the same id is run again; one that finished but is damaged since, with a warning.
     """
     try:
         record = read_finished_run(run_dir)
-    except RunFolderError:
+    except RunFolderError as err:
+        if (run_dir / RUN_FILE).is_file():  # finished once, damaged since: say so (an unfinished run is simply run)
+            warnings.warn(f"batch: {err}; running {run_dir.name} again", DamagedRunWarning, stacklevel=2)
         return None
     if record.get("case_sha256") != variant.case_sha256 or record.get("detector") != variant.detector:
         return None

@@ -13,16 +13,31 @@ collide ...`). How a tooth moves within a step (the
 motion every detector assumes) is `orthosim.geometry.motion`.
 """
 
-from orthosim.geometry.motion import interpolate_pose
-from orthosim.collision.broadphase import arch_neighbour_pairs, candidate_pairs, facing_pairs, sweep_and_prune
-from orthosim.collision.contract import DETECTORS, CollisionError, CollisionRequest, Contacts, PairResult, StepResult
-from orthosim.collision.detect import contacts, default_pairs, detect_step
-from orthosim.collision.model import Body, CollisionModel
-from orthosim.collision.queries import ExactQueries
-from orthosim.collision.time_of_contact import first_time_of_contact
+# The package's names, imported on first use (PEP 562): `orthosim.collision.detectors` is read by
+# the case format and the command line, which must not pull FCL, numba and scipy in with it.
+_FROM = {
+    "interpolate_pose": "orthosim.geometry.motion",
+    "arch_neighbour_pairs": "orthosim.collision.broadphase", "candidate_pairs": "orthosim.collision.broadphase",
+    "facing_pairs": "orthosim.collision.broadphase", "sweep_and_prune": "orthosim.collision.broadphase",
+    "DETECTORS": "orthosim.collision.detectors", "Detector": "orthosim.collision.detectors",
+    "CollisionError": "orthosim.collision.contract", "CollisionRequest": "orthosim.collision.contract",
+    "Contacts": "orthosim.collision.contract", "PairResult": "orthosim.collision.contract",
+    "StepResult": "orthosim.collision.contract",
+    "contacts": "orthosim.collision.detect", "default_pairs": "orthosim.collision.detect",
+    "detect_step": "orthosim.collision.detect",
+    "Body": "orthosim.collision.model", "CollisionModel": "orthosim.collision.model",
+    "ExactQueries": "orthosim.collision.queries",
+    "first_time_of_contact": "orthosim.collision.time_of_contact",
+}
+__all__ = sorted(_FROM)
 
-__all__ = [
-    "Body", "CollisionError", "CollisionModel", "CollisionRequest", "Contacts", "DETECTORS", "ExactQueries", "PairResult",
-    "StepResult", "arch_neighbour_pairs", "candidate_pairs", "contacts", "default_pairs", "detect_step", "facing_pairs",
-    "first_time_of_contact", "interpolate_pose", "sweep_and_prune",
-]
+
+def __getattr__(name: str):
+    if name not in _FROM:
+        raise AttributeError(f"module 'orthosim.collision' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(_FROM[name]), name)
+    globals()[name] = value
+    return value
+

@@ -89,6 +89,15 @@ if AVAILABLE:
         return res
 
     @njit(cache=True, nogil=True)
+    def _overlap(node, a, b):
+        """Whether nodes a and b overlap: the descent's test, (x_a - x_b)^2 + ... <= (r_a + r_b)^2 in float32."""
+        dx = node[a, 0] - node[b, 0]
+        dy = node[a, 1] - node[b, 1]
+        dz = node[a, 2] - node[b, 2]
+        s = node[a, 3] + node[b, 3]
+        return dx * dx + dy * dy + dz * dz <= s * s
+
+    @njit(cache=True, nogil=True)
     def _walk(node, split_key, child_start, child_count, roots_a, roots_b, first_only, stack_size, w, stride):
         """Leaf pairs (rows pair, a, b, round) of every pair's walk; node ids are compact (body * w
         + j) inside, flat (body * stride + j) in the result.
@@ -105,11 +114,7 @@ if AVAILABLE:
         for q in range(p):
             a0 = roots_a[q]
             b0 = roots_b[q]
-            dx = node[a0, 0] - node[b0, 0]
-            dy = node[a0, 1] - node[b0, 1]
-            dz = node[a0, 2] - node[b0, 2]
-            s = node[a0, 3] + node[b0, 3]
-            if not (dx * dx + dy * dy + dz * dz <= s * s):
+            if not _overlap(node, a0, b0):
                 continue
             st_a[0] = a0
             st_b[0] = b0

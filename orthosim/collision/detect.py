@@ -18,6 +18,7 @@ from orthosim.collision.broadphase import candidate_pairs, sweep_and_prune
 from orthosim.collision.circles import bounding_circles, circles_overlap, overlap_spheres
 from orthosim.collision.continuous import refine_time_of_contact, swept_leaves
 from orthosim.collision.contract import DETECTORS, CollisionError, CollisionRequest, Contacts, StepResult, empty_leaves
+from orthosim.collision.detectors import CIRCLES, DISCRETE, Detector, detector_named
 from orthosim.collision.discrete import overlapping_leaves
 from orthosim.collision.model import CollisionModel
 from orthosim.geometry.motion import chord_deviation_bound, interpolate_poses, rotation_angle
@@ -46,51 +47,72 @@ def default_pairs(model: CollisionModel, poses: np.ndarray | None = None, absent
     return [(keys[i], keys[j]) for i, j in idx]
 
 
+def resolve_detector(detector: str | Detector) -> Detector:
+    """The Detector for a name (or the Detector given); CollisionError naming the choices otherwise."""
+    found = detector_named(detector)
+    if found is None:
+        raise CollisionError(None, "detector", f"unknown detector {detector!r}", f"use one of {', '.join(DETECTORS)}")
+    return found
+
+
 def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], poses_end: Mapping[int, np.ndarray] | None = None,
-                pairs: Sequence[tuple[int, int]] | None = None, detector: str = "discrete",
+                pairs: Sequence[tuple[int, int]] | None = None, detector: str | Detector = "discrete",
                 request: CollisionRequest = CollisionRequest(), queries: ExactQueries | None = None) -> StepResult:
     """Test every candidate pair of one step with one detector.
 
     poses_start, poses_end: FDI -> (4, 4) local -> arch frame (mm); teeth not given keep their rest pose.
     pairs: (FDI a, FDI b) to test; the broad phase (`default_pairs`) when None.
-    detector: "circles", "discrete", "continuous" or "exact".
+    detector: a `Detector` (`orthosim.collision.detectors`) or its name: "circles", "discrete",
+        "continuous" or "exact".
     queries: the run's `ExactQueries` of this model, for the exact detector and the refinement of
         the continuous detector's time of contact (one is made for this call when None); the sphere
         trees' node centres are then placed through its memo (a step places the same poses twice).
     """
-    if detector not in DETECTORS:
-        raise CollisionError(None, "detector", f"unknown detector {detector!r}", f"use one of {', '.join(DETECTORS)}")
+    d = resolve_detector(detector)
     P0 = model.pose_array(poses_start)
     P1 = model.pose_array(poses_end) if poses_end is not None else P0
     if pairs is None:
-        pairs = default_pairs(model, P0, poses_end=P1) if detector == "continuous" else default_pairs(model, P1)
+        pairs = default_pairs(model, P0, poses_end=P1) if d.sweeps else default_pairs(model, P1)
     pairs_arr = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
     pair_idx = model.pair_indices(pairs_arr)
+    return _STEP[d.name](model, P0, P1, pairs_arr, pair_idx, request, queries)
+
+
+def _circles_step(model, P0, P1, pairs_arr, pair_idx, request, queries) -> StepResult:
+    """Detector 1 at the end poses: overlapping bounding circles. No tree leaves: each touching
+    pair's contact is the lens of its two circles, one sphere given for both teeth (leaf index -1),
+    so that the renderer draws circles contacts too."""
+    c, r = bounding_circles(model, P1)
+    touching = circles_overlap(c, r, pair_idx)
+    hit = np.flatnonzero(touching)
+    centers, radii = overlap_spheres(model, P1, pair_idx[hit])
+    leaves = dict(pair_of_leaf=hit.astype(np.int64), leaf_pairs=np.full((len(hit), 2), -1, np.int64),
+                  centers_a=centers, centers_b=centers.copy(), radii_a=radii, radii_b=radii.copy())
+    return StepResult("circles", pairs_arr, touching, np.full(len(pair_idx), np.nan), **leaves)
+
+
+def _discrete_step(model, P0, P1, pairs_arr, pair_idx, request, queries) -> StepResult:
+    """Detector 2 at the end poses: overlapping leaf spheres of the two trees."""
     p = len(pair_idx)
-    nan = np.full(p, np.nan)
-    if detector == "circles":
-        c, r = bounding_circles(model, P1)
-        touching = circles_overlap(c, r, pair_idx)
-        # no tree leaves: each touching pair's contact is the lens of its two circles, one sphere
-        # given for both teeth (leaf index -1), so that the renderer draws circles contacts too
-        hit = np.flatnonzero(touching)
-        centers, radii = overlap_spheres(model, P1, pair_idx[hit])
-        leaves = dict(pair_of_leaf=hit.astype(np.int64), leaf_pairs=np.full((len(hit), 2), -1, np.int64),
-                      centers_a=centers, centers_b=centers.copy(), radii_a=radii, radii_b=radii.copy())
-        return StepResult("circles", pairs_arr, touching, nan, **leaves)
-    if detector == "exact":
-        return _exact_step(P1, pairs_arr, pair_idx, request, queries or ExactQueries(model))
-    first_only = not request.all_leaf_pairs
-    if detector == "discrete":
-        W = queries.world_centers(P1) if queries is not None else model.world_centers(P1)
-        pair, la, lb = overlapping_leaves(model, P1, pair_idx, first_only, world=W)
-        touching = np.zeros(p, bool)
-        touching[pair] = True
-        return StepResult("discrete", pairs_arr, touching, nan, **_leaf_arrays(model, pair_idx, pair, la, lb, P1, P1, W=W))
-    # continuous
+    W = queries.world_centers(P1) if queries is not None else model.world_centers(P1)
+    pair, la, lb = overlapping_leaves(model, P1, pair_idx, not request.all_leaf_pairs, world=W)
+    touching = np.zeros(p, bool)
+    touching[pair] = True
+    return StepResult("discrete", pairs_arr, touching, np.full(p, np.nan),
+                      **_leaf_arrays(model, pair_idx, pair, la, lb, P1, P1, W=W))
+
+
+def _exact_reference_step(model, P0, P1, pairs_arr, pair_idx, request, queries) -> StepResult:
+    return _exact_step(P1, pairs_arr, pair_idx, request, queries or ExactQueries(model))
+
+
+def _continuous_step(model, P0, P1, pairs_arr, pair_idx, request, queries) -> StepResult:
+    """Detector 3 over the motion P0 -> P1: each pair's time of first contact (refined on the exact
+    meshes on request), and the leaves overlapping when it first touches, drawn where they are then."""
+    p = len(pair_idx)
     place = queries.world_centers if queries is not None else model.world_centers
     W0, W1 = place(P0), place(P1)
-    pair, la, lb, t, leave = swept_leaves(model, P0, P1, pair_idx, first_only, world0=W0, world1=W1)
+    pair, la, lb, t, leave = swept_leaves(model, P0, P1, pair_idx, not request.all_leaf_pairs, world0=W0, world1=W1)
     toc = np.full(p, np.inf)
     np.minimum.at(toc, pair, t)
     toc[np.isinf(toc)] = np.nan
@@ -107,10 +129,16 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
     at = toc[pair]
     live = (t <= at) & (at <= leave)
     pair, la, lb = pair[live], la[live], lb[live]
-    touching = ~np.isnan(toc)
     leaves = _leaf_arrays(model, pair_idx, pair, la, lb, P0, P0, W=W0)
-    # pairs first touching after t = 0: their leaves drawn where they are at that time: on their
-    # chords when those stray less than DRAW_TOLERANCE_MM from the true paths, else at the poses
+    _place_drawn_leaves(model, leaves, pair_idx, pair, la, lb, toc, P0, P1, W0, W1)
+    return StepResult("continuous", pairs_arr, ~np.isnan(toc), toc, **leaves)
+
+
+def _place_drawn_leaves(model, leaves, pair_idx, pair, la, lb, toc, P0, P1, W0, W1) -> None:
+    """Pairs first touching after t = 0: their leaves drawn where they are at that time: on their
+    chords when those stray less than DRAW_TOLERANCE_MM from the true paths, else at the poses."""
+    p = len(pair_idx)
+    touching = ~np.isnan(toc)
     sel = np.flatnonzero(toc[pair] > 0)
     if len(sel):
         ts = toc[pair[sel]][:, None]
@@ -128,7 +156,10 @@ def detect_step(model: CollisionModel, poses_start: Mapping[int, np.ndarray], po
         redo = _leaf_arrays(model, pair_idx, pair[sel], la[sel], lb[sel], Ta, Tb, per_pair=True)
         leaves["centers_a"][sel] = redo["centers_a"]
         leaves["centers_b"][sel] = redo["centers_b"]
-    return StepResult("continuous", pairs_arr, touching, toc, **leaves)
+
+
+_STEP = {"circles": _circles_step, "discrete": _discrete_step, "continuous": _continuous_step,
+         "exact": _exact_reference_step}
 
 
 def _leaf_arrays(model, pair_idx, pair, la, lb, Pa, Pb, per_pair=False, W=None):
@@ -177,7 +208,7 @@ def _exact_step(P, pairs_arr, pair_idx, request, queries: ExactQueries):
 
 
 def contacts(model: CollisionModel, poses: Mapping[int, np.ndarray], request: CollisionRequest, queries: ExactQueries,
-             pairs: Sequence[tuple[int, int]] | None = None, detector: str = "continuous") -> Contacts:
+             pairs: Sequence[tuple[int, int]] | None = None, detector: str | Detector = "continuous") -> Contacts:
     """The contacts of the bodies at `poses` as `detector` sees them: touching pairs, what is drawn
     as contact, and the exact interpenetration (and, where it decided contact, distance) of the pairs.
 
@@ -185,8 +216,7 @@ def contacts(model: CollisionModel, poses: Mapping[int, np.ndarray], request: Co
     overlapping leaf spheres whose exact meshes are also within `request.touch_tolerance_mm`; exact:
     exact meshes within that tolerance. pairs: FDI pairs to look at (the broad phase when None).
     """
-    if detector not in DETECTORS:
-        raise CollisionError(None, "detector", f"unknown detector {detector!r}", f"use one of {', '.join(DETECTORS)}")
+    d = resolve_detector(detector)
     if pairs is None:
         pairs = default_pairs(model, model.pose_array(poses))
     pairs = [tuple(map(int, p)) for p in pairs]
@@ -195,23 +225,24 @@ def contacts(model: CollisionModel, poses: Mapping[int, np.ndarray], request: Co
     # the pairs whose meshes may intersect: FCL is asked their interpenetration, the rest are apart
     # (exact: a distance above 0; sphere trees: no overlapping leaf pair, the trees being conservative)
     may_meet = pairs
-    if detector == "exact":
+    if d.bounds == "meshes":
         distance = {p: queries.distance(p, poses) for p in pairs}
         touching = [p for p in pairs if distance[p] <= tol]
         may_meet = [p for p in pairs if distance[p] <= 0.0]
         centers, radii = np.zeros((0, 3)), np.zeros(0)
     else:
-        res = detect_step(model, poses, None, pairs, "circles" if detector == "circles" else "discrete",
+        # the contacts at one set of poses: the detector's bounds tested there (sweeping needs no motion)
+        res = detect_step(model, poses, None, pairs, CIRCLES if d.bounds == "circles" else DISCRETE,
                           CollisionRequest(all_leaf_pairs=True), queries=queries)
         touching = res.touching_pairs()
-        if detector != "circles":
+        if d.bounds != "circles":
             may_meet = touching
-        if detector == "continuous":
+        if d.exact_touch:
             distance = {p: queries.distance(p, poses) for p in touching}
             touching = [p for p in touching if distance[p] <= tol]
         kept = set(touching)
         keep = np.isin(res.pair_of_leaf, [i for i, p in enumerate(map(tuple, res.pairs.tolist())) if p in kept])
-        if detector == "circles":  # one lens per pair, given for both teeth
+        if d.bounds == "circles":  # one lens per pair, given for both teeth
             centers, radii = res.centers_a[keep], res.radii_a[keep]
         else:
             centers = np.concatenate([res.centers_a[keep], res.centers_b[keep]])

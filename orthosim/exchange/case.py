@@ -105,6 +105,37 @@ class Simulation:
 
 
 @dataclass(frozen=True)
+class Biomechanics:
+    """The rate law's constants ([biomechanics] table; see `orthosim.movement.biomechanics`).
+
+    parameters: the named set the table starts from: "paper" (the paper's replication values, the
+    default, so cases written before the table keep their numbers) or "clinical" (fitted to the
+    evidence table, `orthosim evidence`). Each number the table gives replaces the set's own;
+    None keeps it. Units: cN, mm per month (365.25/12 days), mm^2, a plain factor."""
+
+    parameters: str = "paper"
+    threshold_cN: float | None = None
+    saturation_cN: float | None = None
+    max_rate_mm_per_month: float | None = None
+    reference_root_area_mm2: float | None = None
+    mandibular_bone_factor: float | None = None
+
+    def overrides(self) -> dict[str, float | None]:
+        """The table's own numbers by RateLaw field name (max_rate still per month)."""
+        return {k: getattr(self, k) for k in _BIOMECHANICS[1:]}
+
+
+@dataclass(frozen=True)
+class Occlusion:
+    """How the bite closes after each step ([occlusion] table; see orthosim.movement.closure)."""
+
+    closure: str | None = None  # "hinge" or "none"; None: hinge for mesh models with both arches, none for parametric
+    # right and left condyle centres (arch frame, mm) for a known patient; None: estimated from the arch
+    condylar_axis: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    max_opening_deg: float = 8.0  # the widest the mandible opens from rest (degrees)
+
+
+@dataclass(frozen=True)
 class Case:
     path: Path
     name: str
@@ -118,6 +149,8 @@ class Case:
     detector: str
     simulation: Simulation = Simulation()
     staging: CaseStaging | None = None  # the [start] and [target] sections (aligner staging), or None
+    biomechanics: Biomechanics = Biomechanics()  # the [biomechanics] table: the rate law's constants
+    occlusion: Occlusion = Occlusion()
 
     @property
     def steps(self) -> int:
@@ -186,16 +219,43 @@ class Case:
         return is_cached(*self._mesh_model_key())
 
 
-_TOP = ("case", "model", "treatment", "wire", "loads", "simulation", "start", "target")
+_TOP = ("case", "model", "treatment", "wire", "loads", "simulation", "start", "target", "biomechanics", "occlusion")
 _CASE = ("name", "description")
 _MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files", "scale", "frame",
           "max_triangles_per_tooth", "upper", "lower")
 MIN_TRIANGLES_PER_TOOTH = 10_000  # fewer would flatten a molar's cusps and fossae (the smooth parametric molar has 7,000)
+MAX_TRIANGLES_PER_TOOTH = 2_000_000  # 32 teeth of that hold about 3 GB of mesh arrays
+MAX_RESOLUTION = 256  # ring points: four times the finest preset
+# What a real mouth allows, per numeric field: (low, high, unit, why); README "Allowed ranges" says the
+# same with sources. A value outside is refused in one line before any work.
+RANGES = {
+    "diastema_mm": (0.0, 10.0, "mm", "wider than a central incisor's crown (8.5 mm) is no gap tooth movement closes"),
+    "scale": (1e-4, 1e4, "", "mm per file unit: 0.001 for micrometres, 25.4 for inches, 1000 for metres"),
+    "duration_days": (0.0, 1825.0, "days", "five years; fixed-appliance treatment lasts 20 months on average"),
+    "step_days": (0.0, 365.0, "days", "a year; visits are 4-8 weeks apart and aligners change every 1-2 weeks"),
+    "force_cN": (0.0, 500.0, "cN", "orthodontic forces on a tooth are 10-120 cN; 500 cN is orthopaedic"),
+    "moment_cNmm": (-5000.0, 5000.0, "cN*mm", "a 500 cN force at the 10 mm moment-to-force ratio of bodily movement"),
+    "point": (-30.0, 30.0, "mm", "the longest tooth, a canine, is 27 mm from cusp tip to apex"),
+}
+
+
+def _bounded(r: FieldReader, key: str, default: float, positive: bool = False) -> float:
+    """A number of the case within its `RANGES` entry (one-line CaseError naming field and range)."""
+    low, high, unit, why = RANGES[key]
+    return r.number(key, default, positive=positive, minimum=None if positive else low, maximum=high, unit=unit, why=why)
 FRAMES = ("arch", "scan")
 _TREATMENT = ("extractions", "duration_days", "step_days", "detector")
 _WIRE = ("type",)
+_OCCLUSION = ("closure", "condylar_axis", "max_opening_deg")
 _SIMULATION = ("force_share", "restitution", "resistance_rule", "resistance_fraction", "occlusal_slide_mm")
 RESISTANCE_RULES = ("literature", "paper")
+_BIOMECHANICS = ("parameters", "threshold_cN", "saturation_cN", "max_rate_mm_per_month", "reference_root_area_mm2",
+                 "mandibular_bone_factor")
+# (lowest, highest, unit, example) of each number of the [biomechanics] table
+_BIOMECHANICS_RANGES = {"threshold_cN": (0.0, 300.0, "cN", "20"), "saturation_cN": (1.0, 1000.0, "cN", "150"),
+                        "max_rate_mm_per_month": (0.01, 5.0, "mm per month", "1.0"),
+                        "reference_root_area_mm2": (50.0, 1000.0, "mm^2", "200"),
+                        "mandibular_bone_factor": (0.25, 4.0, "", "1.0")}
 _LOAD = ("teeth", "force_cN", "direction", "point", "moment_cNmm", "moment_axis", "movement")
 
 
@@ -232,8 +292,8 @@ def load_case(path: str | Path) -> Case:
         extractions.append(treat.tooth(f"extractions[{i}]", t, present))
     if len(set(extractions)) != len(extractions):
         treat.fail("extractions", "lists a tooth twice", "list each tooth once")
-    duration = treat.number("duration_days", 90.0, positive=True)
-    step = treat.number("step_days", 1.0, positive=True)
+    duration = _bounded(treat, "duration_days", 90.0, positive=True)
+    step = _bounded(treat, "step_days", 1.0, positive=True)
     if step > duration:
         treat.fail("step_days", f"step ({step:g} days) is longer than the duration ({duration:g} days)",
                    "use a step no longer than duration_days")
@@ -250,7 +310,52 @@ def load_case(path: str | Path) -> Case:
     simulation = _read_simulation(FieldReader(path, "simulation", top.get("simulation", {}), _SIMULATION))
 
     staging = read_case_staging(path, data, present, set(extractions))
-    return Case(path, name, description, model, tuple(extractions), loads, wire, duration, step, detector, simulation, staging)
+    biomechanics = _read_biomechanics(FieldReader(path, "biomechanics", top.get("biomechanics", {}), _BIOMECHANICS))
+    occlusion = _read_occlusion(FieldReader(path, "occlusion", top.get("occlusion", {}), _OCCLUSION))
+    return Case(path, name, description, model, tuple(extractions), loads, wire, duration, step, detector, simulation, staging,
+                biomechanics, occlusion)
+
+
+def _read_biomechanics(r: FieldReader) -> Biomechanics:
+    from orthosim.movement.ratelaw import PARAMETER_SETS
+
+    parameters = r.string("parameters", "paper", tuple(PARAMETER_SETS))
+    values = {}
+    for key, (low, high, unit, example) in _BIOMECHANICS_RANGES.items():
+        if key not in r.table:
+            continue
+        v = r.number(key)
+        if not low <= v <= high:
+            r.fail(key, f"{v:g}{' ' + unit if unit else ''} is outside {low:g} to {high:g}",
+                   f"use a value from {low:g} to {high:g}, e.g. {example}, or leave it out")
+        values[key] = v
+    base = PARAMETER_SETS[parameters]
+    threshold = values.get("threshold_cN", base.threshold_cN)
+    saturation = values.get("saturation_cN", base.saturation_cN)
+    if saturation <= threshold:
+        key = "saturation_cN" if "saturation_cN" in values else "threshold_cN"
+        r.fail(key, f"the saturation force ({saturation:g} cN) must exceed the threshold ({threshold:g} cN)",
+               f"raise saturation_cN above threshold_cN (the {parameters!r} set has {base.threshold_cN:g} and {base.saturation_cN:g})")
+    return Biomechanics(parameters, **values)
+
+
+def _read_occlusion(r: FieldReader) -> Occlusion:
+    closure = r.string("closure", None, ("hinge", "none")) if "closure" in r.table else None
+    axis = None
+    if "condylar_axis" in r.table:
+        raw = r.get("condylar_axis")
+        if not (isinstance(raw, list) and len(raw) == 2):
+            r.fail("condylar_axis", f"must be two points, got {raw!r}",
+                   "write [[x, y, z], [x, y, z]]: the right and the left condyle centre, arch frame, mm")
+        right, left = (r.vector(f"condylar_axis[{i}]", p) for i, p in enumerate(raw))
+        if math.dist(right, left) < 40.0:
+            r.fail("condylar_axis", f"the condyles are {math.dist(right, left):.1f} mm apart",
+                   "give the two condyle centres, about 100 mm apart (Bonwill), in mm")
+        axis = (right, left)
+    widest = r.number("max_opening_deg", 8.0, positive=True)
+    if widest > 30.0:
+        r.fail("max_opening_deg", f"{widest:g} degrees is beyond a mouth's hinge opening", "use at most 30")
+    return Occlusion(closure, axis, widest)
 
 
 def _read_simulation(r: FieldReader) -> Simulation:
@@ -284,12 +389,14 @@ def _read_model(path: Path, r: FieldReader) -> ModelSpec:
                 r.fail("resolution", f"unknown resolution {resolution!r}", f"use one of {', '.join(RESOLUTIONS)} or an even number >= 6")
         elif isinstance(resolution, bool) or not isinstance(resolution, int) or resolution < 6 or resolution % 2:
             r.fail("resolution", f"must be a preset name or an even number >= 6, got {resolution!r}", "use e.g. \"smooth\" or 40")
-        return ModelSpec(kind, resolution, r.boolean("third_molars", False), r.number("diastema_mm", 0.0))
+        if isinstance(resolution, int) and resolution > MAX_RESOLUTION:
+            r.fail("resolution", f"{resolution} ring points is more than {MAX_RESOLUTION}", "use e.g. \"fine\" (64) or fewer points")
+        return ModelSpec(kind, resolution, r.boolean("third_molars", False), _bounded(r, "diastema_mm", 0.0))
 
     for key in ("resolution", "third_molars"):
         if key in r.table:
             r.fail(key, "applies only to the parametric model", "remove it, or set kind = \"parametric\"")
-    diastema = r.number("diastema_mm", 0.0)
+    diastema = _bounded(r, "diastema_mm", 0.0)
     if kind == "labelled-scan":
         return _read_labelled_scan_model(path, r, diastema)
     for key in ("upper", "lower"):
@@ -338,7 +445,7 @@ def _read_model(path: Path, r: FieldReader) -> ModelSpec:
                 r.fail(f"folder[{i}]" if many else "folder", f"no tooth_N.stl files in {f}",
                        "point it at an Open-Full-Jaw maxilla or mandible folder, or the patient folder holding both")
     budget = _triangle_budget(r)
-    return ModelSpec(kind, diastema_mm=diastema, folder=folder, files=files, scale=r.number("scale", 1.0, positive=True),
+    return ModelSpec(kind, diastema_mm=diastema, folder=folder, files=files, scale=_bounded(r, "scale", 1.0),
                      folders=tuple(folders) if kind == "open-full-jaw" else (), frame=frame,
                      max_triangles_per_tooth=budget)
 
@@ -371,9 +478,10 @@ def _read_labelled_scan_model(path: Path, r: FieldReader, diastema: float) -> Mo
 
 def _triangle_budget(r: FieldReader) -> int | None:
     budget = r.get("max_triangles_per_tooth")
-    if budget is not None and (isinstance(budget, bool) or not isinstance(budget, int) or budget < MIN_TRIANGLES_PER_TOOTH):
-        r.fail("max_triangles_per_tooth", f"must be a whole number of at least {MIN_TRIANGLES_PER_TOOTH:,}, got {budget!r}",
-               "write e.g. 100000 (the default), or leave it out")
+    if budget is not None and (isinstance(budget, bool) or not isinstance(budget, int)
+                               or not MIN_TRIANGLES_PER_TOOTH <= budget <= MAX_TRIANGLES_PER_TOOTH):
+        r.fail("max_triangles_per_tooth", f"must be a whole number of at least {MIN_TRIANGLES_PER_TOOTH:,} and at most "
+               f"{MAX_TRIANGLES_PER_TOOTH:,}, got {budget!r}", "write e.g. 100000 (the default), or leave it out")
     return budget
 
 
@@ -403,8 +511,8 @@ def _read_load(path: Path, i: int, raw: Any, present: set[int], extracted: set[i
         if t in extracted:
             r.fail(f"teeth[{j}]", f"tooth {t} is extracted in this case and cannot carry a load",
                    "load a tooth that stays, or remove it from treatment.extractions")
-    force = r.number("force_cN", 0.0)
-    moment = r.number("moment_cNmm", 0.0, minimum=None)
+    force = _bounded(r, "force_cN", 0.0)
+    moment = _bounded(r, "moment_cNmm", 0.0)
     if force == 0.0 and moment == 0.0:
         r.fail(None, "has neither a force nor a moment", "set force_cN (cN) and/or moment_cNmm (cN*mm)")
     direction_raw = r.get("direction", "mesial")
@@ -416,6 +524,10 @@ def _read_load(path: Path, i: int, raw: Any, present: set[int], extracted: set[i
             r.fail("direction", "is the zero vector", "give a non-zero direction in the arch frame")
     point_raw = r.get("point", "bracket")
     point = r.string("point", "bracket", POINTS) if isinstance(point_raw, str) else r.vector("point", point_raw)
+    low, high, unit, why = RANGES["point"]
+    if not isinstance(point, str) and not all(low <= x <= high for x in point):
+        r.fail("point", f"{list(point)} is more than {high:g} {unit} from the tooth's CEJ centre",
+               f"give tooth-frame coordinates from {low:g} to {high:g} {unit} ({why})")
     moment_axis = r.string("moment_axis", "mesiodistal", MOMENT_AXES)
     movement = r.string("movement", "auto", MOVEMENTS)
     if movement not in WIRE_MOVEMENTS[wire.type]:

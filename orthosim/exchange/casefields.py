@@ -45,7 +45,10 @@ class FieldReader:
             self.fail(key, f"unknown value {value!r}", f"use one of: {', '.join(choices)}")
         return value
 
-    def number(self, key: str, default: float | None = None, positive: bool = False, minimum: float | None = 0.0) -> float:
+    def number(self, key: str, default: float | None = None, positive: bool = False, minimum: float | None = 0.0,
+               maximum: float | None = None, unit: str = "", why: str = "") -> float:
+        """A finite number within [minimum, maximum] (above 0 when `positive`); `unit` and `why` (the
+        reason for the range) go into the one-line error of a value outside it."""
         value = self.table.get(key, default)
         if value is None:
             self.fail(key, "missing", "add a number")
@@ -54,10 +57,15 @@ class FieldReader:
         value = float(value)
         if not math.isfinite(value):
             self.fail(key, f"must be finite, got {value}", "write a finite number (no nan or inf)")
+        allowed = _range_text(0.0 if positive and minimum is None else minimum, maximum, unit, positive)
+        reason = f"; {why}" if why else ""
         if positive and value <= 0:
-            self.fail(key, f"must be positive, got {value:g}", "use a value above 0")
+            self.fail(key, f"must be positive, got {value:g}", f"use a value above 0{allowed and ': ' + allowed}{reason}")
         if minimum is not None and value < minimum:
-            self.fail(key, f"must be at least {minimum:g}, got {value:g}", f"use a value of {minimum:g} or more")
+            self.fail(key, f"must be at least {minimum:g}, got {value:g}",
+                      (f"use {allowed}" if maximum is not None else f"use a value of {minimum:g} or more") + reason)
+        if maximum is not None and value > maximum:
+            self.fail(key, f"must be at most {maximum:g}{unit and ' ' + unit}, got {value:g}", f"use {allowed}{reason}")
         return value
 
     def boolean(self, key: str, default: bool) -> bool:
@@ -81,6 +89,18 @@ class FieldReader:
             self.fail(key, f"tooth {value} ({F.name(value)}) is not in the model",
                       f"use one of the model's teeth ({teeth_list(present)}) or add it to the model")
         return value
+
+
+def _range_text(minimum: float | None, maximum: float | None, unit: str, open_low: bool) -> str:
+    """'a value from 0 to 10 mm', 'a value above 0 and at most 365 days', '' without a maximum."""
+    if maximum is None:
+        return ""
+    unit = f" {unit}" if unit else ""
+    if minimum is None:
+        return f"a value of at most {maximum:g}{unit}"
+    if open_low:
+        return f"a value above {minimum:g} and at most {maximum:g}{unit}"
+    return f"a value from {minimum:g} to {maximum:g}{unit}"
 
 
 def teeth_list(teeth: set[int]) -> str:

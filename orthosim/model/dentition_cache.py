@@ -7,9 +7,11 @@ that. The cache is keyed like the sphere-tree cache (`orthosim.spheretree.cache`
 model's parameters, the bytes of every input file (meshes, axes), `BUILDER_VERSION` (bumped when a
 builder changes its output on purpose) and the source text of the modules that build dentitions
 (so an edited builder never serves a stale model). An entry is one .npz of plain arrays and a JSON
-header (no pickle), written atomically: two processes building the same model at once both end
-with a whole file. An entry that cannot be read is a miss, reported in one warning line, rebuilt
-and overwritten; a folder that cannot be written costs a rebuild next time, never a failure.
+header (no pickle), checksummed and written atomically through `orthosim.storage.cacheentry`: two
+processes building the same model at once both end with a whole file. An entry that fails its
+checks (unreadable, wrong checksum or key, non-finite numbers, wrong shapes, face indices out of
+range) is a miss, reported in one warning line naming it, rebuilt and overwritten; a folder that
+cannot be written costs a rebuild next time, never a failure.
 Warnings the build raised (mesh repairs) are stored with it and raised again on every load.
 
 The folder is `$ORTHOSIM_CACHE/dentitions` when that is set, else `~/.cache/orthosim/dentitions`.
@@ -22,27 +24,28 @@ import importlib
 import json
 import os
 import warnings
-import zipfile
 from pathlib import Path
 from typing import Callable, Iterable, Mapping
 
 import numpy as np
 
-from orthosim.storage.atomic import atomic_path
+from orthosim.errors import DamagedFileError
+from orthosim.storage.cacheentry import ENTRY_FORMAT, DamagedEntryWarning, damaged, read_arrays, warn_damaged, write_arrays
 from orthosim.storage.sourcedigest import source_digest
 
 BUILDER_VERSION = 1
+ENTRY_KIND = "dentition"
 # Modules whose code decides what a built dentition holds: their source is part of the key.
 _BUILDER_MODULES = ("model/anatomy", "model/archform", "model/dentition", "model/fdi", "collision/interpenetration",
-                    "exchange/meshload", "geometry/meshrefine", "analysis/occlusion", "exchange/openfulljaw",
+                    "exchange/meshload", "exchange/meshfolder", "geometry/meshrefine", "analysis/occlusion", "exchange/openfulljaw",
                     "model/parametric", "exchange/scanfolders", "exchange/scanframe", "model/tooth", "model/toothshape",
                     "geometry/meshquery", "geometry/penetration",
                     "model/rootsynthesis", "exchange/labelledscan", "geometry/meshcut")
 _PACKAGE = Path(__file__).resolve().parents[1]  # orthosim/
 
 
-class DentitionCacheWarning(UserWarning):
-    """A cached dentition could not be read; it is rebuilt."""
+class DentitionCacheWarning(DamagedEntryWarning):
+    """A cached dentition failed its checks (checksum, header, content); it is rebuilt."""
 
 
 def default_cache_dir() -> Path:
@@ -61,13 +64,14 @@ def parametric_parameters(resolution: int | str, third_molars: bool, diastema_mm
 
 
 def cache_key(parameters: Mapping, input_files: Iterable[str | Path] = ()) -> str:
-    """Hex SHA-256 of the model parameters (JSON), the input files' bytes and the builder (version, code)."""
+    """Hex SHA-256 of the model parameters (JSON), the input files' bytes, the builder (version, code)
+    and the entry format (`orthosim.storage.cacheentry.ENTRY_FORMAT`)."""
     h = hashlib.sha256()
     h.update(json.dumps(parameters, sort_keys=True, default=str).encode())
     for path in sorted(Path(p) for p in input_files):
         h.update(path.name.encode())
         h.update(hashlib.sha256(path.read_bytes()).digest())
-    h.update(f"|v{BUILDER_VERSION}|{_builder_source_digest()}".encode())
+    h.update(f"|v{BUILDER_VERSION}|{_builder_source_digest()}|entry{ENTRY_FORMAT}".encode())
     return h.hexdigest()
 
 
@@ -82,7 +86,8 @@ def _jsonable(obj):
 
 
 def save_dentition(dent, path: str | Path, raised: list[tuple[str, str]] = ()) -> None:
-    """Write a dentition as .npz (atomically): per tooth its mesh, face parts, landmarks and frame."""
+    """Write a dentition as a checksummed .npz entry (atomically): per tooth its mesh, face parts,
+    landmarks and frame; the entry's key is the file name's stem."""
     arrays: dict[str, np.ndarray] = {}
     teeth = []
     for n, t in dent.teeth.items():
@@ -101,37 +106,78 @@ def save_dentition(dent, path: str | Path, raised: list[tuple[str, str]] = ()) -
     header = {"description": dent.description, "info": _jsonable(dent.info), "teeth": teeth,
               "warnings": [list(w) for w in raised], "gingiva": list(dent.gingiva)}
     arrays["header"] = np.array(json.dumps(header))
-    with atomic_path(path, suffix=".npz") as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
+    write_arrays(path, ENTRY_KIND, Path(path).stem, arrays)
+
+
+def _tooth_arrays(path: Path, z: Mapping[str, np.ndarray], entry: Mapping) -> dict:
+    """One tooth's arrays from an entry, checked for shape, finiteness and face indices."""
+    n = int(entry["fdi"])
+    names = {"vertices": (None, 3), "faces": (None, 3), "face_part": (None,), "crown_center": (3,), "apex": (3,),
+             "rest_pose": (4, 4), **{f"landmark_{name}": (3,) for name in entry["landmarks"]}}
+    out = {}
+    for name, shape in names.items():
+        a = z.get(f"{n}_{name}")
+        if a is None or a.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, a.shape)):
+            raise damaged(path, f"tooth {n}: {name} is missing or has the wrong shape")
+        if a.dtype.kind == "f" and not np.isfinite(a).all():
+            raise damaged(path, f"tooth {n}: {name} holds non-finite numbers")
+        out[name] = a
+    faces = out["faces"]
+    if faces.dtype.kind not in "iu" or (faces.size and (faces.min() < 0 or faces.max() >= len(out["vertices"]))):
+        raise damaged(path, f"tooth {n}: a face names a vertex that does not exist")
+    if len(out["face_part"]) != len(faces):
+        raise damaged(path, f"tooth {n}: {len(out['face_part'])} face parts for {len(faces)} faces")
+    return out
 
 
 def load_dentition(path: str | Path):
-    """(dentition, warnings raised when it was built) from a file written by `save_dentition`."""
+    """(dentition, warnings raised when it was built) from an entry written by `save_dentition`.
+
+    Raises FileNotFoundError when absent, `DamagedFileError` when the entry fails its checksum,
+    header or content checks (shapes, finite numbers, face indices)."""
     import trimesh
 
     from orthosim.model.dentition import Dentition
     from orthosim.model.tooth import Tooth
 
-    with np.load(path, allow_pickle=False) as z:
+    path = Path(path)
+    z = read_arrays(path, ENTRY_KIND, path.stem)
+    try:
         header = json.loads(str(z["header"]))
         teeth = {}
         for entry in header["teeth"]:
             n = int(entry["fdi"])
-            mesh = trimesh.Trimesh(z[f"{n}_vertices"], z[f"{n}_faces"], process=False)
-            teeth[n] = Tooth(fdi=n, mesh=mesh, face_part=z[f"{n}_face_part"], crown_center=z[f"{n}_crown_center"],
-                             apex=z[f"{n}_apex"], rest_pose=z[f"{n}_rest_pose"],
-                             landmarks={name: z[f"{n}_landmark_{name}"] for name in entry["landmarks"]},
-                             source=entry["source"], root_origin=_root_origin(entry.get("root", "scan")))
-        gingiva = {name: trimesh.Trimesh(z[f"gingiva_{name}_vertices"], z[f"gingiva_{name}_faces"], process=False)
-                   for name in header.get("gingiva", [])}
-    return Dentition(teeth, header["description"], header["info"], gingiva), [tuple(w) for w in header["warnings"]]
+            a = _tooth_arrays(path, z, entry)
+            mesh = trimesh.Trimesh(a["vertices"], a["faces"], process=False)
+            teeth[n] = Tooth(fdi=n, mesh=mesh, face_part=a["face_part"], crown_center=a["crown_center"], apex=a["apex"],
+                             rest_pose=a["rest_pose"], source=entry["source"],
+                             landmarks={name: a[f"landmark_{name}"] for name in entry["landmarks"]},
+                             root_origin=_root_origin(path, entry.get("root", "scan")))
+        gingiva = {name: _gingiva_mesh(path, z, name) for name in header.get("gingiva", [])}
+        raised = [tuple(w) for w in header["warnings"]]
+        return Dentition(teeth, header["description"], header["info"], gingiva), raised
+    except (KeyError, TypeError, ValueError) as err:  # a header this version did not write
+        raise damaged(path, f"its header does not describe a dentition ({type(err).__name__}: {err})") from None
 
 
-def _root_origin(value) -> str:
+def _root_origin(path: Path, value) -> str:
     if value not in ("scan", "estimated"):
-        raise ValueError(f"unknown root origin {value!r}")  # a damaged entry: read as a miss and rebuilt
+        raise damaged(path, f"a tooth's root is {value!r}, neither 'scan' nor 'estimated'")
     return value
+
+
+def _gingiva_mesh(path: Path, z: Mapping[str, np.ndarray], name: str):
+    """A scanned gum's mesh from an entry, checked like the teeth's arrays."""
+    import trimesh
+
+    v, f = z.get(f"gingiva_{name}_vertices"), z.get(f"gingiva_{name}_faces")
+    if v is None or f is None or v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
+        raise damaged(path, f"gingiva {name}: vertices or faces missing or of the wrong shape")
+    if not np.isfinite(v).all():
+        raise damaged(path, f"gingiva {name}: vertices hold non-finite numbers")
+    if f.dtype.kind not in "iu" or (f.size and (f.min() < 0 or f.max() >= len(v))):
+        raise damaged(path, f"gingiva {name}: a face names a vertex that does not exist")
+    return trimesh.Trimesh(v, f, process=False)
 
 
 def _warning_class(qualified: str) -> type[Warning]:
@@ -168,9 +214,10 @@ def cached_dentition(parameters: Mapping, build: Callable[[], object], input_fil
     if path.is_file():
         try:
             dent, raised = load_dentition(path)
-        except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile, json.JSONDecodeError) as err:
-            warnings.warn(f"dentition cache entry {path} is unreadable ({type(err).__name__}); rebuilding it",
-                          DentitionCacheWarning, stacklevel=2)
+        except FileNotFoundError:
+            pass  # removed since the look: a miss
+        except DamagedFileError as err:
+            warn_damaged("dentition", err, DentitionCacheWarning)
         else:
             _replay(raised)
             return dent

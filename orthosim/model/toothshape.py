@@ -261,18 +261,7 @@ def build_tooth_shape(dims: ToothDimensions, arch: Arch, ttype: ToothType, resol
     top = np.array([0.0, table + float(occlusal(np.zeros(1), np.zeros(1))[0]), 0.0])
     body = _loft(rings, np.array([0.0, bottom, 0.0]), top)
 
-    landmarks = {
-        "mesial_contact": np.array([half_md, y_contact, 0.0]),
-        "distal_contact": np.array([-half_md, y_contact, 0.0]),
-    }
-    for cusp in recipe.cusps:
-        cx, cz = occlusal.cusp_xz(cusp)
-        landmarks[cusp.name] = np.array([cx, table + float(occlusal(np.array([cx]), np.array([cz]))[0]), cz])
-    if arch is Arch.LOWER and ttype.is_molar:
-        # The buccal groove runs between the mesiobuccal and distobuccal cusps, on the buccal face.
-        mb, db = landmarks["mb_cusp"], landmarks["db_cusp"]
-        landmarks["buccal_groove"] = np.array([(mb[0] + db[0]) / 2, y_contact, half_bl])
-
+    landmarks = _landmarks(recipe, occlusal, arch, ttype, half_md, half_bl, y_contact, table)
     mesh = body
     if multi:
         parts = [body] + [_root_mesh(r, recipe, cerv_a, cerv_b, L, n) for r in recipe.roots]
@@ -284,6 +273,24 @@ def build_tooth_shape(dims: ToothDimensions, arch: Arch, ttype: ToothType, resol
     landmarks["apex"] = np.array([0.0, -L, 0.0])
     crown_height = float(mesh.vertices[:, 1].max())
     return ToothShape(mesh, crown_height, y_contact, landmarks)
+
+
+def _landmarks(recipe, occlusal, arch: Arch, ttype: ToothType, half_md: float, half_bl: float, y_contact: float,
+               table: float) -> dict[str, np.ndarray]:
+    """The crown's landmarks in the local frame (mm): contact points, cusp tips, a lower molar's
+    buccal groove."""
+    landmarks = {
+        "mesial_contact": np.array([half_md, y_contact, 0.0]),
+        "distal_contact": np.array([-half_md, y_contact, 0.0]),
+    }
+    for cusp in recipe.cusps:
+        cx, cz = occlusal.cusp_xz(cusp)
+        landmarks[cusp.name] = np.array([cx, table + float(occlusal(np.array([cx]), np.array([cz]))[0]), cz])
+    if arch is Arch.LOWER and ttype.is_molar:
+        # The buccal groove runs between the mesiobuccal and distobuccal cusps, on the buccal face.
+        mb, db = landmarks["mb_cusp"], landmarks["db_cusp"]
+        landmarks["buccal_groove"] = np.array([(mb[0] + db[0]) / 2, y_contact, half_bl])
+    return landmarks
 
 
 def _root_mesh(root: Root, recipe: ShapeRecipe, cerv_a: float, cerv_b: float, L: float, n: int) -> trimesh.Trimesh:

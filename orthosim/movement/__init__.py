@@ -7,19 +7,25 @@ impact response), `simulation` (model, state and the step's phases; `simulate`),
 (metrics.json and distances.csv).
 """
 
-from orthosim.movement.biomechanics import Motion, RateLaw, ToothMechanics, build_mechanics, movement_type, tooth_motion
+from orthosim.movement.ratelaw import RateLaw
 from orthosim.movement.records import StepRecord
 
 _FROM_SIMULATION = ("MovementModel", "MovementSettings", "StepState", "initial_state", "simulate", "step")
+_FROM_BIOMECHANICS = ("Motion", "ToothMechanics", "build_mechanics", "movement_type", "tooth_motion")
 
 
 def __getattr__(name: str):
-    # the step loop imports the collision package (FCL, numba): loaded when first asked for, so that
-    # a process that only reads step records (`orthosim.movement.records`) does without
+    # the step loop imports the collision package (FCL, numba) and the mechanics the tooth meshes
+    # (trimesh): loaded when first asked for, so that a process that only reads step records
+    # (`orthosim.movement.records`) or a case file (`orthosim.movement.ratelaw`) does without
     if name in _FROM_SIMULATION:
         from orthosim.movement import simulation
 
         return getattr(simulation, name)
+    if name in _FROM_BIOMECHANICS:
+        from orthosim.movement import biomechanics
+
+        return getattr(biomechanics, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

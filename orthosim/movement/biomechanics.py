@@ -15,6 +15,12 @@ with F_0 = 20 cN, F_sat = 150 cN, r_max = 1 mm per 30 days and A_ref = 200 mm^2 
 premolar's root surface). A premolar under 100 cN then moves 0.62 mm a month and under 150 cN
 1 mm a month: the literature's 0.5 to 1 mm a month for bodily movement at 100 to 150 cN. A first
 molar (about 300 mm^2 of root) under 150 cN moves 0.6 mm a month: molars are anchorage.
+These are the paper's replication values (`PARAMETER_SETS["paper"]`, every case's default). The
+"clinical" set is fitted to the evidence table (`orthosim/movement/evidence.toml`; the fit is
+`orthosim.analysis.calibration`, its residuals in docs/notes/clinical-evidence.md) and adds a
+mandibular bone factor k: a lower tooth resists as if its root surface were k times larger
+(A_root -> k A_root above), standing for the mandible's denser bone, which trials find moves
+canines more slowly than the maxilla.
 
 Force system to motion (Smith and Burstone's linear model). A force F at point P and a couple M
 act on a tooth whose centre of resistance is C. The centre of resistance translates at rate(F)
@@ -45,40 +51,16 @@ import numpy as np
 
 from orthosim.movement.vec import length
 
+from orthosim.model.fdi import Arch
+from orthosim.movement.ratelaw import DAYS_PER_MONTH, PARAMETER_SETS, RateLaw
 from orthosim.model.tooth import ROOT, Tooth
 from orthosim.movement.resistance import center_of_resistance, tipping_center
 
 # Tooth density for masses and inertias (mean of enamel, dentine and root): 2.2 g/cm^3 = 2.2e-3 g/mm^3.
 DENSITY_G_PER_MM3 = 2.2e-3
+LOWER = Arch.LOWER
 CONTROLLED_TIPPING_MF_MM = 7.0  # M/F (mm) that puts the centre of rotation at the apex
 AXIAL_LEVER_MM = 3.0  # lever (mm) of a couple about the long axis: about half a crown's width
-
-
-@dataclass(frozen=True)
-class RateLaw:
-    """Tooth movement rate as a function of force (see the module text). Units: cN, mm/day, mm^2."""
-
-    threshold_cN: float = 20.0
-    saturation_cN: float = 150.0
-    max_rate_mm_per_day: float = 1.0 / 30.0
-    reference_root_area_mm2: float = 200.0
-
-    def rate(self, force_cN, root_area_mm2) -> np.ndarray:
-        """mm/day for a force magnitude (cN, scalar or array) on a root of `root_area_mm2` (mm^2)
-        (a float for a float force and area: the same IEEE operations without numpy's per-call cost)."""
-        if isinstance(force_cN, float) and isinstance(root_area_mm2, float):
-            x = (force_cN * self.reference_root_area_mm2 / root_area_mm2 - self.threshold_cN) / (
-                self.saturation_cN - self.threshold_cN)
-            if x != x:
-                return math.nan
-            return self.max_rate_mm_per_day * (0.0 if x < 0.0 else 1.0 if x > 1.0 else x)
-        f_eff = np.asarray(force_cN, float) * self.reference_root_area_mm2 / np.asarray(root_area_mm2, float)
-        s = np.clip((f_eff - self.threshold_cN) / (self.saturation_cN - self.threshold_cN), 0.0, 1.0)
-        return self.max_rate_mm_per_day * s
-
-    def moves(self, force_cN, root_area_mm2) -> bool:
-        """Whether the force is above the threshold for this root (scalar)."""
-        return bool(self.rate(force_cN, root_area_mm2) > 0.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,6 +78,12 @@ class ToothMechanics:
     mass_g: float
     center_of_mass: np.ndarray  # (3,) mm local
     inertia_g_mm2: np.ndarray  # (3, 3) g*mm^2 about the centre of mass, local axes
+    bone_factor: float = 1.0  # the rate law's mandibular bone factor for a lower tooth, 1 for an upper one
+
+    @property
+    def resisting_area_mm2(self) -> float:
+        """mm^2: the root surface the rate law scales the force by (root area times the bone factor)."""
+        return self.root_area_mm2 * self.bone_factor if self.bone_factor != 1.0 else self.root_area_mm2
 
     @property
     def bracket_lever_mm(self) -> float:
@@ -122,8 +110,10 @@ def bracket_point(tooth: Tooth) -> np.ndarray:
     return np.array([float(tooth.crown_center[0]), y, z])
 
 
-def build_mechanics(tooth: Tooth, rule: str = "literature", fraction: float = 0.4) -> ToothMechanics:
-    """The tooth's mechanics (centre of resistance by `rule`, see `resistance`); mass at 2.2 g/cm^3."""
+def build_mechanics(tooth: Tooth, rule: str = "literature", fraction: float = 0.4,
+                    law: RateLaw | None = None) -> ToothMechanics:
+    """The tooth's mechanics (centre of resistance by `rule`, see `resistance`); mass at 2.2 g/cm^3;
+    a lower tooth takes `law`'s mandibular bone factor (none without a law)."""
     cr = center_of_resistance(tooth, rule, fraction)
     bracket = bracket_point(tooth)
     d = float(bracket[1] - cr[1])
@@ -141,8 +131,9 @@ def build_mechanics(tooth: Tooth, rule: str = "literature", fraction: float = 0.
         mass = float(np.prod(ext)) * 0.5 * DENSITY_G_PER_MM3
         com = mesh.bounds.mean(axis=0)
         inertia = np.diag([ext[1] ** 2 + ext[2] ** 2, ext[0] ** 2 + ext[2] ** 2, ext[0] ** 2 + ext[1] ** 2]) * mass / 12
+    bone = law.mandibular_bone_factor if law is not None and tooth.arch == LOWER else 1.0
     return ToothMechanics(tooth.fdi, cr, tipping_center(tooth), bracket, np.asarray(tooth.crown_center, float),
-                          np.asarray(tooth.apex, float), area, sigma2, mass, com, inertia)
+                          np.asarray(tooth.apex, float), area, sigma2, mass, com, inertia, bone)
 
 
 def center_of_rotation_offset(mech: ToothMechanics, m_over_f_mm: float) -> float:
@@ -232,7 +223,7 @@ def tooth_motion(mech: ToothMechanics, pose: np.ndarray, force_cN: np.ndarray, p
     F = np.asarray(force_cN, float)
     Mc = np.asarray(couple_cNmm, float)
     f = length(F)
-    area = mech.root_area_mm2
+    area = mech.resisting_area_mm2
     if wire == "round":
         Q = R @ mech.tipping_center + p
         M = (np.cross(np.asarray(point, float) - Q, F) if f > 0 else 0.0) + Mc
@@ -244,9 +235,7 @@ def tooth_motion(mech: ToothMechanics, pose: np.ndarray, force_cN: np.ndarray, p
     if f > 0 and (translation_only or not np.any(Mc)):
         return Motion(C, F / f * law.rate(f, area), _axial_spin(Mc, axis, area, law) if not translation_only else np.zeros(3))
     if f > 0:  # force and couple: the user's force system, Smith and Burstone
-        M = np.cross(np.asarray(point, float) - C, F) + Mc
-        r = law.rate(f, area)
-        return Motion(C, F / f * r, M / mech.sigma2_mm2 * r / f)
+        return free_motion(mech, pose, F, point, Mc, law)
     # a couple alone: the long-axis part turns the tooth about its long axis (through C), the rest
     # about the bracket (the paper's centre of rotation at the crown)
     spin = _axial_spin(Mc, axis, area, law)
@@ -259,6 +248,21 @@ def tooth_motion(mech: ToothMechanics, pose: np.ndarray, force_cN: np.ndarray, p
     if not np.any(spin):
         return Motion(B, np.zeros(3), tip)
     return Motion(B, np.cross(spin, B - C), spin + tip)  # both: first order in the step's angle
+
+
+def free_motion(mech: ToothMechanics, pose: np.ndarray, force_cN: np.ndarray, point: np.ndarray,
+                couple_cNmm: np.ndarray, law: RateLaw) -> Motion:
+    """Smith and Burstone's motion of a tooth under a force system no wire constrains: the centre of
+    resistance translates at rate(|F|) along F and the tooth turns at M_C / sigma^2 * rate / |F|
+    (rad/day), M_C the net moment (cN*mm) about the centre of resistance. pose (4, 4) local -> arch
+    frame; force_cN (3,) cN and point (3,) mm, couple_cNmm (3,) cN*mm, all arch frame; |F| > 0."""
+    R, p = pose[:3, :3], pose[:3, 3]
+    C = R @ mech.center_of_resistance + p
+    F = np.asarray(force_cN, float)
+    f = length(F)
+    M = np.cross(np.asarray(point, float) - C, F) + np.asarray(couple_cNmm, float)
+    r = law.rate(f, mech.resisting_area_mm2)
+    return Motion(C, F / f * r, M / mech.sigma2_mm2 * r / f)
 
 
 def _axial_spin(Mc: np.ndarray, axis: np.ndarray, area: float, law: RateLaw) -> np.ndarray:

@@ -29,6 +29,25 @@ class CollisionEvent:
 
 
 @dataclass(frozen=True, eq=False)
+class BiteRecord:
+    """The bite after a step's closure (`orthosim.movement.closure`): the mandible's hinge angle from
+    rest (degrees, positive open), how far the bite stands open at the incisors and at the first
+    molars (mm, along the occlusal normal; negative: closed further than at rest), the facing pairs
+    in contact at closure, and those the closure could not resolve (their movers were stopped)."""
+
+    angle_deg: float
+    opening_incisors_mm: float
+    opening_molars_mm: float
+    contacts: tuple[tuple[int, int], ...]
+    unresolved: tuple[tuple[int, int], ...] = ()
+
+    def summary(self) -> dict:
+        return {"angle_deg": self.angle_deg, "opening_incisors_mm": self.opening_incisors_mm,
+                "opening_molars_mm": self.opening_molars_mm, "contacts": [list(p) for p in self.contacts],
+                "contact_count": len(self.contacts), "unresolved": [list(p) for p in self.unresolved]}
+
+
+@dataclass(frozen=True, eq=False)
 class StepRecord:
     """The state after one step (step 0: the initial state, before any movement).
 
@@ -41,6 +60,7 @@ class StepRecord:
     distances: the paper's tooth-to-tooth distances (mm) per adjacent pair.
     raw_penetration_mm: deepest interpenetration of any candidate pair as it stands (mm).
     penetrating: ((a, b), mm) for every candidate pair interpenetrating as it stands, deepest first.
+    bite: the bite after the step's closure; None when the run closes no bite (or at step 0).
     """
 
     step: int
@@ -56,6 +76,7 @@ class StepRecord:
     distances: tuple[PairDistance, ...]
     raw_penetration_mm: float = 0.0
     penetrating: tuple[tuple[tuple[int, int], float], ...] = ()
+    bite: BiteRecord | None = None
 
     @property
     def total_distance_mm(self) -> float:

@@ -13,7 +13,11 @@ resistance, the loads' moment-to-force ratio (mm) and the movement it makes}, `t
 interpenetration the movement added to any pair; `initial_penetration_mm` is the model's own, and
 `initial_interpenetration` lists the pairs that start interpenetrating beyond the touch tolerance,
 deepest first, as {`pair`, `mm`}), `collisions` (count), `distances` (per adjacent pair: `pair`,
-`initial_mm`, `final_mm`), and `per_step_file`: the name of the per-step detail beside it.
+`initial_mm`, `final_mm`), and `per_step_file`: the name of the per-step detail beside it. A run that
+closes the bite after every step (`orthosim.movement.closure`) adds `bite` (the change in vertical
+dimension over the treatment, the opening at the molars, the condylar axis) and each lower tooth's
+`moved_in_mandible_mm`, and each line of steps.jsonl its step's `bite` (hinge angle, opening at the
+incisors and the molars in mm, the facing pairs in contact at closure and their count).
 steps.jsonl: one JSON object per line, one line per step (step 0, the initial state, first): its
 time (days), the pose of every tooth, the touching pairs, the tooth-to-tooth distances and their
 total, the largest interpenetration, the collisions (with the impact response) and the propagated
@@ -39,6 +43,7 @@ from typing import IO, Iterable, Iterator
 
 import numpy as np
 
+from orthosim.model.fdi import Arch, arch_of
 from orthosim.storage.atomic import atomic_path, to_jsonable, write_json, write_text
 from orthosim.geometry.motion import rotation_angle
 from orthosim.collision.interpenetration import start_depths
@@ -77,6 +82,7 @@ class RunReport:
         self._start: list | None = None  # ((a, b), mm) interpenetrating at the start, deepest first
         self.last: StepRecord | None = None
         self.max_penetration_mm = 0.0
+        self.widest_bite_mm = 0.0  # the bite's largest opening at the incisors over the run (mm)
         self.collisions = 0
         self.steps_file = Path(steps_file) if steps_file is not None else None
         self._steps: IO[str] | None = None
@@ -95,6 +101,8 @@ class RunReport:
             self._warn_initial_interpenetration(rec)
         self.last = rec
         self.max_penetration_mm = max(self.max_penetration_mm, rec.max_penetration_mm)
+        if rec.bite is not None:
+            self.widest_bite_mm = max(self.widest_bite_mm, rec.bite.opening_incisors_mm)
         self.collisions += len(rec.collisions)
         present = self.model.present
         forces = {}
@@ -115,6 +123,7 @@ class RunReport:
             "max_penetration_mm": rec.max_penetration_mm,
             "collisions": [{"pair": list(e.pair), "time": e.time, **e.impact} for e in rec.collisions],
             **forces,
+            **({"bite": rec.bite.summary()} if rec.bite is not None else {}),
         })
 
     def _write_step(self, step: dict) -> None:
@@ -171,6 +180,7 @@ class RunReport:
             }
         for n, info in self._load_movements().items():
             teeth[str(n)].update(info)
+        bite = self._bite(teeth)
         s = m.settings
         return {
             "case": m.case.name,
@@ -196,7 +206,30 @@ class RunReport:
             "distances": [{"pair": list(a.pair), "initial_mm": a.distance_mm, "final_mm": b.distance_mm}
                           for a, b in zip(first.distances, last.distances)],
             "per_step_file": STEPS_FILE,
+            **bite,
         }
+
+    def _bite(self, teeth: dict) -> dict:
+        """metrics.json's "bite" when the run closes the bite (and each lower tooth's `moved_in_mandible_mm`,
+        its crown centre's displacement in the mandible, the jaw's turn taken out); {} otherwise."""
+        cm, last = self.model.closure, self.last
+        if cm is None or last.bite is None:
+            return {}
+        undo = cm.axis.transform(-last.bite.angle_deg)
+        for n in self.model.dentition.fdis:
+            if arch_of(n) is Arch.LOWER:
+                t = self.model.dentition.teeth[n]
+                c0 = t.to_world(t.crown_center, self.first.poses[n])
+                teeth[str(n)]["moved_in_mandible_mm"] = float(np.linalg.norm(t.to_world(t.crown_center, undo @ last.poses[n]) - c0))
+        return {"bite": {
+            "closure": cm.settings.mode,
+            "condylar_axis_mm": {"right": cm.axis.right_mm, "left": cm.axis.left_mm, "method": cm.axis.method},
+            "angle_deg": last.bite.angle_deg,
+            "vertical_dimension_change_mm": last.bite.opening_incisors_mm,
+            "opening_molars_mm": last.bite.opening_molars_mm,
+            "widest_opening_incisors_mm": self.widest_bite_mm,
+            "contacts": [list(p) for p in last.bite.contacts],
+        }}
 
     def _load_movements(self) -> dict[int, dict]:
         """Per loaded tooth: its centre of resistance (local mm), the couple-to-force ratio of its

@@ -29,6 +29,12 @@ memos) are apart; `step(model, state) -> (state, record)` makes one step (the pa
    motions (a few rounds). Discrete detectors (bounding circles, discrete sphere trees, exact
    meshes) test the end poses: a tooth found overlapping stops there, so it may have sunk into
    its neighbour by up to one step's travel, which is the paper's point about them.
+   With the bite's closure on (`closure`; `[occlusion] closure = "hinge"`, the default for mesh
+   models), facing teeth are not tested here at all: after detection the mandible, carrying the
+   lower teeth, opens about its condylar axis as far as the moved cusps require and closes again
+   to first contact (`closure.settle_bite`), so a tooth moving in contact with an antagonist
+   glides and is stopped only by its own arch's neighbours or by a contact the closure cannot
+   resolve (the tooth then keeps its start pose). The slide allowance above is then unused.
 4. `contacts_at`: the contacts at the new poses (`collision.contacts`) give the touching set of
    the next step and the exact interpenetration.
 5. `response`: each collision's rigid-body impact response (`impact`), one event per pair.
@@ -39,7 +45,8 @@ Units: mm, degrees in reports, cN, cN*mm, days.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import dataclasses
+from dataclasses import dataclass, field, replace
 from typing import Callable, Iterator, Mapping
 
 import numpy as np
@@ -49,14 +56,15 @@ from orthosim.exchange.case import Case, Load
 from orthosim.collision import (CollisionModel, CollisionRequest, Contacts, ExactQueries, candidate_pairs, contacts, detect_step,
                          interpolate_pose)
 from orthosim.model.dentition import Dentition
-from orthosim.collision.detectors import DETECTORS
+from orthosim.collision.detectors import DETECTORS, Detector, detector_named
 from orthosim.errors import CaseError
 from orthosim.collision.interpenetration import default_occlusal_slide_mm
 from orthosim.analysis.metrics import tooth_to_tooth_distances
-from orthosim.movement.biomechanics import Motion, RateLaw, ToothMechanics, build_mechanics, tooth_motion
+from orthosim.movement.biomechanics import (DAYS_PER_MONTH, PARAMETER_SETS, Motion, RateLaw, ToothMechanics, build_mechanics,
+                                           tooth_motion)
 from orthosim.movement.impact import Body, impact
 from orthosim.movement.propagation import ForceBalance, propagate
-from orthosim.movement.records import CollisionEvent, StepRecord
+from orthosim.movement.records import BiteRecord, CollisionEvent, StepRecord
 from orthosim.movement.vec import length
 
 @dataclass(frozen=True)
@@ -93,11 +101,24 @@ class MovementSettings:
         slide = getattr(sim, "occlusal_slide_mm", None)
         if slide is None:
             slide = default_occlusal_slide_mm(dentition) if dentition is not None else cls.occlusal_slide_mm
+        rate = rate_law(getattr(case, "biomechanics", None))
         if sim is None:
-            return cls(occlusal_slide_mm=slide)
+            return cls(occlusal_slide_mm=slide, rate=rate)
         return cls(force_share=sim.force_share, restitution=sim.restitution,
                    resistance_rule=sim.resistance_rule, resistance_fraction=sim.resistance_fraction,
-                   occlusal_slide_mm=slide)
+                   rate=rate, occlusal_slide_mm=slide)
+
+
+def rate_law(biomechanics) -> RateLaw:
+    """The rate law a case's [biomechanics] table names: its parameter set with the table's own
+    numbers over it (`orthosim.exchange.case.Biomechanics`; None: the paper's set)."""
+    if biomechanics is None:
+        return PARAMETER_SETS["paper"]
+    base = PARAMETER_SETS[biomechanics.parameters]
+    changes = {k: v for k, v in biomechanics.overrides().items() if v is not None}
+    if "max_rate_mm_per_month" in changes:
+        changes["max_rate_mm_per_day"] = changes.pop("max_rate_mm_per_month") / DAYS_PER_MONTH
+    return replace(base, **changes) if changes else base
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,6 +137,7 @@ class MovementModel:
     facing: frozenset[tuple[int, int]] = field(default_factory=frozenset)
     total_mass_g: float = 0.0
     arch_orders: dict[F.Arch, list[int]] = field(default_factory=dict)  # present teeth, right to left
+    closure: "ClosureModel | None" = None  # the bite's closure after each step (`closure`); None: the slide allowance
     # FDI -> its place along its arch among the dentition's teeth (extracted ones included), right to left
     arch_place: dict[int, int] = field(init=False, repr=False)
 
@@ -137,10 +159,21 @@ class MovementModel:
         pairs = candidate_pairs(dentition.fdis, extracted)
         neighbours = set(dentition.adjacent_pairs(set(extracted)))
         facing = frozenset(p for p in pairs if tuple(p) not in neighbours)
-        mech = {n: build_mechanics(dentition.teeth[n], settings.resistance_rule, settings.resistance_fraction) for n in present}
+        mech = {n: build_mechanics(dentition.teeth[n], settings.resistance_rule, settings.resistance_fraction, settings.rate)
+                for n in present}
         orders = {arch: [t for t in F.arch_order(arch, set(dentition.teeth)) if t not in extracted] for arch in F.Arch}
         return cls(case, dentition, collision, mech, settings, extracted, present, tuple(map(tuple, pairs)), facing,
-                   arch_orders=orders)
+                   arch_orders=orders, closure=_closure_model(case, dentition, settings, facing, extracted, orders))
+
+
+def _closure_model(case: Case, dentition: Dentition, settings: MovementSettings, facing, extracted, orders):
+    """The bite's closure model when the case closes the bite and both arches have teeth, else None."""
+    from orthosim.movement.closure import ClosureModel, closure_settings
+
+    chosen = closure_settings(case, settings.contact_tolerance_mm)
+    if chosen.mode == "none" or not facing or min(len(orders[F.Arch.UPPER]), len(orders[F.Arch.LOWER])) < 3:
+        return None
+    return ClosureModel.build(chosen, dentition, sorted(facing), extracted)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -250,6 +283,7 @@ class StepState:
     bite: pairs of facing teeth in contact in the initial state (the bite as the model stands): they
         may slide by `occlusal_slide_mm`; contacts the run makes get the touch tolerance.
     centers: FDI -> (3,) crown centres at `poses` (`Dentition.crown_centers`; found when None).
+    mandible_deg: with a closure, the hinge angle the lower teeth's poses stand at.
     """
 
     step: int
@@ -257,10 +291,11 @@ class StepState:
     poses: Mapping[int, np.ndarray]
     touching: tuple[tuple[int, int], ...]
     rest_depths: Mapping[tuple[int, int], float]
-    detector: str
+    detector: Detector  # the run's (`orthosim.collision.detectors`): its capabilities steer the step
     queries: ExactQueries
     bite: frozenset[tuple[int, int]] = frozenset()
     centers: Mapping[int, np.ndarray] | None = None
+    mandible_deg: float = 0.0  # the mandible's hinge angle from rest (degrees, positive open; `closure`)
 
     def slide_allowance(self, model: "MovementModel", pair: tuple[int, int]) -> float:
         """mm a facing pair may sink below the rest state while its cusps slide along each other."""
@@ -298,8 +333,9 @@ def _touch_request(model: MovementModel) -> CollisionRequest:
     return CollisionRequest(all_leaf_pairs=True, touch_tolerance_mm=model.settings.touch_tolerance_mm)
 
 
-def initial_state(model: MovementModel, detector: str, queries: ExactQueries | None = None) -> tuple[StepState, StepRecord]:
-    """The state before any movement (rest poses) and its record (step 0)."""
+def initial_state(model: MovementModel, detector: str | Detector, queries: ExactQueries | None = None) -> tuple[StepState, StepRecord]:
+    """The state before any movement (rest poses) and its record (step 0); detector: a Detector or its name."""
+    detector = detector_named(detector)
     queries = queries or ExactQueries(model.collision)
     P = {n: np.asarray(T, float).copy() for n, T in model.dentition.rest_poses().items()}
     found = contacts(model.collision, P, _touch_request(model), queries, model.pairs, detector)
@@ -321,7 +357,7 @@ def forces(model: MovementModel, state: StepState, centers: Mapping[int, np.ndar
     applied = {n: sum((a.force_cN for a in v), np.zeros(3)) for n, v in loads.items()}
     normals = [(a, b, _normal(model, (a, b), centers)) for a, b in state.touching]
     balance = propagate(applied, normals, s.force_share,
-                        lambda n, f: n in model.mechanics and s.rate.moves(f, model.mechanics[n].root_area_mm2),
+                        lambda n, f: n in model.mechanics and s.rate.moves(f, model.mechanics[n].resisting_area_mm2),
                         _onward(model, P, state.touching, centers))
     return Forces(loads, balance)
 
@@ -370,7 +406,7 @@ def motions(model: MovementModel, state: StepState, f: Forces, centers: Mapping[
                 mi = out.get(i, Motion.still(centers[i]))
                 cur = float(mi.displacement(p, dt)[0] @ n_ij) / dt
                 push = float(balance.total[i] @ n_ij)
-                want = float(s.rate.rate(length(balance.total[i]), model.mechanics[i].root_area_mm2)) * push / max(
+                want = float(s.rate.rate(length(balance.total[i]), model.mechanics[i].resisting_area_mm2)) * push / max(
                     length(balance.total[i]), 1e-12)
                 target = min(away, want)
                 if target > cur + 1e-12:
@@ -391,9 +427,8 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
     overlapping stops there. A pair in contact at the step's start is tested only when the move
     takes the two into each other (`_approaching`, `_sinking`).
     """
-    s = model.settings
     dt = float(model.case.step_days)
-    P, queries = state.poses, state.queries
+    P = state.poses
     P1 = dict(P)
     for n, m in moves.items():
         P1[n] = m.apply(P[n], dt)
@@ -402,7 +437,7 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
     tested_pairs: set = set()
 
     def approaching(pair, current) -> bool:
-        if state.detector != "continuous":
+        if not state.detector.exact_touch:
             return _approaching(model, pair, current, dt, centers)
         end = {n: (P1[n] if n in current else P[n]) for n in pair}
         return _sinking(model, state, pair, end)
@@ -411,54 +446,16 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
         out = []
         for pair in model.pairs:
             a, b = pair
-            if pair in skip or (a not in current and b not in current):
+            if pair in skip or (a not in current and b not in current) or (model.closure is not None and pair in model.facing):
                 continue
             if pair in touching_set and not approaching(pair, current):
                 continue
             out.append(pair)
         return out
 
-    if state.detector == "continuous":
-        tcut = {n: 1.0 for n in moves}
-        done: set = set()
-        request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=True,
-                                   contact_tolerance_mm=s.contact_tolerance_mm, drawn_leaves=False)
-        for _ in range(s.rounds):
-            current = {n: m for n, m in moves.items() if tcut[n] > 0}
-            pairs = tested(_scaled(current, tcut), done)
-            tested_pairs.update(pairs)
-            if not pairs:
-                break
-            res = detect_step(model.collision, P, P1, pairs, "continuous", request, queries=queries)
-            found = [(tuple(map(int, pr)), float(t)) for pr, t in zip(res.pairs, res.time_of_first_contact) if not np.isnan(t)]
-            if not found:
-                break
-            for pair, t in found:
-                done.add(pair)
-                if pair in touching_set:
-                    continue  # a contact held from the last step stops the tooth; it is no new collision
-                P_at = dict(P1)
-                for n in pair:
-                    if n in tcut:
-                        P_at[n] = interpolate_pose(P[n], P1[n], t)
-                hits.append(Hit(pair, t * _frac(tcut, pair), P_at))
-            cut: dict[int, float] = {}
-            scaled = _scaled(moves, tcut)
-            for pair, t in found:
-                for n in _at_fault(model, pair, scaled, dt, centers):
-                    if n in tcut:
-                        cut[n] = min(cut.get(n, 1.0), t)
-            for n, t in cut.items():
-                P1[n] = interpolate_pose(P[n], P1[n], t)
-                tcut[n] *= t
-        # The sliding allowance was checked at the intended end of each move; a move cut short
-        # by another contact may stop mid-way over a cusp, deeper than its end would be: such a
-        # tooth keeps its start pose, so the bound holds on the poses a step leaves.
-        for pair in touching_set:
-            if pair in model.facing and any(P1[n] is not P[n] for n in pair) and \
-                    queries.penetration(pair, P1) - state.rest_depths.get(pair, 0.0) > state.slide_allowance(model, pair):
-                for n in pair:
-                    P1[n] = P[n]
+    if state.detector.sweeps:
+        _cut_back(model, state, moves, P1, tested, centers, hits, tested_pairs)
+        _hold_slides_within_allowance(model, state, P1)
     else:
         pairs = tested(moves, set())
         tested_pairs.update(pairs)
@@ -466,6 +463,61 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
             res = detect_step(model.collision, P, P1, pairs, state.detector)
             hits.extend(Hit(pair, 1.0, P1) for pair in res.touching_pairs() if pair not in touching_set)
     return Detection(P1, tuple(hits), frozenset(tested_pairs))
+
+
+def _cut_back(model: MovementModel, state: StepState, moves: dict[int, Motion], P1: dict, tested: Callable,
+              centers: Mapping[int, np.ndarray], hits: list, tested_pairs: set) -> None:
+    """A sweeping detector's rounds: every mover cut back to its earliest time of first contact
+    (cutting one tooth may put it in another's way); `P1` (FDI -> end pose) is cut in place, new
+    contacts appended to `hits`, the pairs asked added to `tested_pairs`."""
+    s, P, queries = model.settings, state.poses, state.queries
+    dt = float(model.case.step_days)
+    touching_set = set(state.touching)
+    tcut = {n: 1.0 for n in moves}
+    done: set = set()
+    request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=True,
+                               contact_tolerance_mm=s.contact_tolerance_mm, drawn_leaves=False)
+    for _ in range(s.rounds):
+        current = {n: m for n, m in moves.items() if tcut[n] > 0}
+        pairs = tested(_scaled(current, tcut), done)
+        tested_pairs.update(pairs)
+        if not pairs:
+            break
+        res = detect_step(model.collision, P, P1, pairs, state.detector, request, queries=queries)
+        found = [(tuple(map(int, pr)), float(t)) for pr, t in zip(res.pairs, res.time_of_first_contact) if not np.isnan(t)]
+        if not found:
+            break
+        for pair, t in found:
+            done.add(pair)
+            if pair in touching_set:
+                continue  # a contact held from the last step stops the tooth; it is no new collision
+            P_at = dict(P1)
+            for n in pair:
+                if n in tcut:
+                    P_at[n] = interpolate_pose(P[n], P1[n], t)
+            hits.append(Hit(pair, t * _frac(tcut, pair), P_at))
+        cut: dict[int, float] = {}
+        scaled = _scaled(moves, tcut)
+        for pair, t in found:
+            for n in _at_fault(model, pair, scaled, dt, centers):
+                if n in tcut:
+                    cut[n] = min(cut.get(n, 1.0), t)
+        for n, t in cut.items():
+            P1[n] = interpolate_pose(P[n], P1[n], t)
+            tcut[n] *= t
+
+
+def _hold_slides_within_allowance(model: MovementModel, state: StepState, P1: dict) -> None:
+    """The sliding allowance was checked at the intended end of each move; a move cut short by
+    another contact may stop mid-way over a cusp, deeper than its end would be: such a tooth keeps
+    its start pose (in `P1`), so the bound holds on the poses a step leaves. With a closure, the
+    arches' contacts are the closure's."""
+    P, queries = state.poses, state.queries
+    for pair in set(state.touching) if model.closure is None else ():
+        if pair in model.facing and any(P1[n] is not P[n] for n in pair) and \
+                queries.penetration(pair, P1) - state.rest_depths.get(pair, 0.0) > state.slide_allowance(model, pair):
+            for n in pair:
+                P1[n] = P[n]
 
 
 def _sinking(model: MovementModel, state: StepState, pair, end: Mapping[int, np.ndarray]) -> bool:
@@ -518,14 +570,29 @@ def step(model: MovementModel, state: StepState) -> tuple[StepState, StepRecord]
     f = forces(model, state, centers)
     moves = motions(model, state, f, centers)
     detected = detection(model, state, moves, centers)
-    P = detected.poses
-    moved = frozenset(n for n in moves if not _close(P[n], state.poses[n]))
+    P, angle, closed = detected.poses, state.mandible_deg, None
+    if model.closure is not None:
+        from orthosim.movement.closure import settle_bite
+
+        closed, P = settle_bite(model.closure, model.collision, state.queries, state.poses, P, angle)
+    moved = frozenset(n for n in moves if not _close(P[n], state.poses[n]))  # in the mandible, before it turns
+    if closed is not None:
+        P, angle = closed.poses, closed.angle_deg
     found = contacts_at(model, state, P)
     events = response(model, state, moves, detected, found, centers)
     k = state.step + 1
     new = StepState(k, k * float(model.case.step_days), P, found.touching, state.rest_depths, state.detector, state.queries,
-                    state.bite, model.dentition.crown_centers(P))
-    return new, _record(model, new, moved, found, events, f.balance)
+                    state.bite, model.dentition.crown_centers(P), angle)
+    record = _record(model, new, moved, found, events, f.balance)
+    if closed is None:
+        return new, record
+    return new, dataclasses.replace(record, bite=_bite_record(model, closed, found))
+
+
+def _bite_record(model: MovementModel, closed, found: Contacts) -> BiteRecord:
+    incisors, molars = model.closure.opening_mm(closed.angle_deg)
+    contacts = tuple(p for p in found.touching if p in model.facing)
+    return BiteRecord(float(closed.angle_deg), incisors, molars, contacts, closed.unresolved)
 
 
 def _record(model: MovementModel, state: StepState, moved: frozenset[int], found: Contacts,
@@ -623,18 +690,18 @@ def _impact(model: MovementModel, pair, moves, P_contact, dt, centers, restituti
     return hit.summary()
 
 
-def simulate(model: MovementModel, detector: str | None = None, steps: int | None = None,
+def simulate(model: MovementModel, detector: str | Detector | None = None, steps: int | None = None,
              queries: ExactQueries | None = None) -> Iterator[StepRecord]:
     """Run the case of `model` with `detector` (one of `orthosim.collision.detectors.DETECTORS`; the case's by
     default) for `steps` steps of the case's step_days (the case's count by default): the initial
     record (step 0), then one per `step`. queries: the run's exact queries on `model.collision`
     when the caller has prepared them (a fresh one otherwise)."""
-    detector = detector or model.case.detector
-    if detector not in DETECTORS:
+    chosen = detector_named(detector or model.case.detector)
+    if chosen is None:
         raise CaseError(model.case.path, "treatment.detector", f"unknown detector {detector!r}",
                         f"use one of: {', '.join(DETECTORS)}")
     n_steps = model.case.steps if steps is None else int(steps)
-    state, record = initial_state(model, detector, queries)
+    state, record = initial_state(model, chosen, queries)
     yield record
     for _ in range(n_steps):
         state, record = step(model, state)

@@ -48,7 +48,6 @@ import multiprocessing
 import os
 import pickle
 import queue
-import re
 import signal
 import sys
 import threading
@@ -245,59 +244,6 @@ def release_freed_heap() -> bool:
         return bool(ctypes.CDLL(None).malloc_trim(0))
     except (OSError, AttributeError):
         return False
-
-
-# the JIT compilers' libraries: numba's (llvmlite) and Mesa llvmpipe's (libLLVM-15.so.1, libLLVM.so.19 ...)
-COMPILER_LIBRARIES = re.compile(r"^(libllvmlite\.so|libLLVM[-.])")
-_MADV_DONTNEED = 4
-_PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
-
-
-def release_compiler_pages(libraries: re.Pattern = COMPILER_LIBRARIES) -> int:
-    """Unmap this process's resident pages of the read-only mappings of `libraries` (file names
-    matched from their start) that are the file's own pages; bytes released (0 off Linux).
-
-    Why: an LLVM's code runs while it compiles (numba's functions as they load, llvmpipe's shaders
-    at the first frames) and then lies idle, yet stays mapped: 60-70 MB of libllvmlite in the
-    simulation process, ~54 MB of libLLVM in the drawing one. A page of the file, never written,
-    is read back from the page cache (or the disk) when next used, the same: Linux
-    `madvise(MADV_DONTNEED)` on a private file mapping. A page this process has changed (relocated
-    data made read-only after loading, a swapped-out copy) is not the file's: /proc/self/pagemap
-    says which, and those are left alone. Milliseconds.
-    """
-    if not sys.platform.startswith("linux"):
-        return 0
-    import numpy as np
-
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        madvise = libc.madvise
-        madvise.argtypes, madvise.restype = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int], ctypes.c_int
-        spans = []
-        with open("/proc/self/maps") as maps:
-            for line in maps:
-                parts = line.split(None, 5)
-                if len(parts) == 6 and "w" not in parts[1] and libraries.match(os.path.basename(parts[5].rstrip())):
-                    spans.append(tuple(int(x, 16) for x in parts[0].split("-")))
-        with open("/proc/self/pagemap", "rb", buffering=0) as pagemap:
-            flags = [np.frombuffer(os.pread(pagemap.fileno(), (hi - lo) // _PAGE * 8, lo // _PAGE * 8), np.uint64)
-                     >> np.uint64(61) for lo, hi in spans]
-        if not any((f >> np.uint64(2)).any() for f in flags):  # nothing resident, or a pagemap that shows nothing: leave all
-            return 0
-        released = 0
-        for (lo, hi), f in zip(spans, flags):
-            present, swapped, file_page = (f >> np.uint64(2)) & 1, (f >> np.uint64(1)) & 1, f & 1
-            own = ((present == 1) & (file_page == 0)) | (swapped == 1)  # this process's copy: keep
-            # runs of pages holding no copy of our own, as [a, b) page indices
-            edges = np.flatnonzero(np.diff(np.concatenate(([1], own.astype(np.int8), [1]))))
-            for a, b in zip(edges[::2], edges[1::2]):
-                if madvise(lo + int(a) * _PAGE, int(b - a) * _PAGE, _MADV_DONTNEED) == 0:
-                    released += int(((present[a:b] == 1) & (file_page[a:b] == 1)).sum()) * _PAGE
-        return released
-    except (OSError, AttributeError, ValueError):
-        return 0
-
-
 def _portable(exc: BaseException) -> bytes:
     """The pickled exception, or a RuntimeError naming it when it cannot cross a process boundary."""
     try:

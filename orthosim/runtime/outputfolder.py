@@ -40,7 +40,7 @@ from orthosim.runtime.runfolder import RUN_FILE
 # What an `orthosim run` folder may hold without run.json (a run from before run.json existed):
 # such a folder is an earlier run, and may be replaced.
 RUN_OUTPUTS = frozenset({RUN_FILE, "metrics.json", "distances.csv", "distances_per_step.csv", "steps.jsonl", "frames",
-                         "scene", "animation.mp4", "animation.gif"})
+                         "scene", "animation.mp4", "animation.gif", "evidence.json", "index.html"})
 _STAGING = ".orthosim-staging-"
 _OLD = ".orthosim-old-"
 _LOCK = ".orthosim-lock"

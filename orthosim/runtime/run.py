@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
 from orthosim.errors import OrthosimError
+from orthosim.runtime.stream import PhaseDone, RunResult, model_files, model_summary, simulation_stream  # noqa: F401 (the run's face)
 
 MIN_ANIMATION_S = 5.0  # default animation length: at least this many seconds
 SCENE_FORMATS = ("glb", "ply")
@@ -71,24 +72,6 @@ class RunOptions:
     simulate_in_process: bool = False  # batch workers: one per core already, so no simulation child per run
     single_core: bool = False  # batch workers: also simulate, draw and encode on one thread, ffmpeg on one (implies simulate_in_process)
     verbosity: int = 1
-
-
-@dataclass(frozen=True)
-class PhaseDone:
-    """A phase of the simulation side ended (sent by the child among its step records)."""
-
-    name: str
-    seconds: float
-    detail: str = ""
-
-
-@dataclass(frozen=True)
-class RunResult:
-    """The simulation side's last item: the run's report, ready to write."""
-
-    metrics: dict
-    distances_csv: str
-    model_files: dict  # for run.json: the model's description and source files
 
 
 @dataclass
@@ -183,72 +166,6 @@ def frames_per_step(options: RunOptions, steps: int) -> int:
     return max(1, math.ceil((seconds * options.fps - 1) / max(steps, 1)))
 
 
-# ------------------------------------------------------------------------- 2-4. model, trees, simulate
-
-
-def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, shared: bool = False) -> Iterator:
-    """The simulation side of a run: PhaseDone("model"), PhaseDone("trees"), one StepRecord per step,
-    then the RunResult. Picklable arguments: it runs in the child process when the run draws.
-    The per-step detail (steps.jsonl, distances_per_step.csv) streams into out_dir as it comes.
-    shared: `dentition` is drawn meanwhile by another thread of this process (its meshes' caches
-    are then left alone)."""
-    from orthosim.runtime.background import release_compiler_pages, release_freed_heap
-    from orthosim.collision import CollisionModel, ExactQueries
-    from orthosim.analysis.metrics import occlusion_summary
-    from orthosim.movement.report import DISTANCES_PER_STEP_FILE, STEPS_FILE, RunReport
-    from orthosim.movement.simulation import MovementModel, simulate
-
-    t0 = time.perf_counter()
-    cached = dentition is None and case.dentition_is_cached()
-    dent = dentition if dentition is not None else case.build_dentition()
-    t1 = time.perf_counter()
-    collision = CollisionModel.from_dentition(dent)
-    release_compiler_pages()  # numba's functions are loaded (the sphere trees'), before the BVHs' memory comes
-    # a tooth's whole-mesh BVH is built when a step first needs it (most steps ask patches only:
-    # case 1 needs 8 of its 24 teeth's), not for every tooth up front: ~55 MB less in a drawn run
-    queries = ExactQueries(collision)
-    t2 = time.perf_counter()
-    model = MovementModel.build(case, dent, collision=collision)
-    if not shared:
-        dent.drop_mesh_caches()  # the meshes' derived arrays the build asked for (~30 MB on 28 teeth)
-    release_freed_heap()  # what building the model freed, before a run of any length
-    t3 = time.perf_counter()
-    how = "from the cache" if cached else ("given" if dentition is not None else "built")
-    yield PhaseDone("model", (t1 - t0) + (t3 - t2), f"{dent.description}, {how}")
-    yield PhaseDone("trees", t2 - t1, f"{len(collision.bodies)} sphere trees")
-    out_dir = Path(out_dir)
-    report = RunReport(model, detector, steps_file=out_dir / STEPS_FILE, distances_file=out_dir / DISTANCES_PER_STEP_FILE)
-    depth_kernels = False
-    for record in report.collect(simulate(model, detector, queries=queries)):
-        yield record
-        if record.step == 1:  # and what the first steps compiled: numba's compiler lies idle from now on
-            release_compiler_pages()
-        elif not depth_kernels and "orthosim.geometry.penetration" in sys.modules:
-            # the depth kernels load on a run's first intersecting pair, whenever that comes, and
-            # loading them touches the compiler's pages again
-            depth_kernels = True
-            release_compiler_pages()
-    report.finish_streams(out_dir)
-    metrics = report.metrics()
-    metrics["model"] = model_summary(dent)
-    metrics["occlusion"] = occlusion_summary(dent)  # the initial model's
-    metrics["occlusion_final"] = occlusion_summary(dent, {n: report.last.poses[n] for n in dent.fdis})
-    yield RunResult(metrics, report.distances_csv(), model_files(dent))
-
-
-_PATH_KEYS = ("source", "files", "axes_file")  # model info that names files on this machine: run.json's
-
-
-def model_summary(dent) -> dict:
-    """What metrics.json says of the model: its kind and build figures, without machine paths."""
-    return {"teeth": len(dent.teeth), **{k: v for k, v in dent.info.items() if k not in _PATH_KEYS}}
-
-
-def model_files(dent) -> dict:
-    """What run.json says of the model: its description and the files it was read from."""
-    return {"description": dent.description, **{k: v for k, v in dent.info.items() if k in _PATH_KEYS}}
-
-
 class _Split:
     """Step records out of a simulation stream; phases reported to the log, the result kept."""
 
@@ -279,21 +196,6 @@ class _Split:
 
 # ------------------------------------------------------------------------------------------ the run
 
-_SIMULATION_MODULES = ("orthosim.runtime.run", "orthosim.collision", "orthosim.movement.simulation")
-# what both sides of a drawn run use (the teeth: numpy, scipy, trimesh and FCL, which trimesh loads),
-# imported before the fork so that the two processes share it; the step's own (the collision
-# package, numba) only the simulation child imports, and the renderer only this process
-_SHARED_MODULES = ("orthosim.runtime.run", "orthosim.model.dentition", "orthosim.analysis.metrics", "orthosim.movement.records")
-
-
-def _import_modules(names) -> None:
-    """Import `names` now (before a fork: the child shares them)."""
-    import importlib
-
-    for name in names:
-        importlib.import_module(name)
-
-
 def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = RunOptions(),
              draw: Callable | None = None, check_view: Callable[[str], str] | None = None,
              shown_dir: str | Path | None = None, summary_to: Callable[[str], None] | None = None) -> dict:
@@ -307,11 +209,6 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
     the summary line (when the verbosity shows it) instead of printing it, so that a caller can
     print it once the folder is in place.
     """
-    from contextlib import ExitStack
-
-    from orthosim.storage.atomic import write_json, write_text
-    from orthosim.runtime.runfolder import write_run_record
-
     log = RunLog(options.verbosity)
     t = time.perf_counter()
     case, options = validate(case_path, out_dir, options, check_view if options.render else None)
@@ -331,71 +228,16 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
         if options.export_scene and record.step in wanted:
             posed[record.step] = record
 
-    rendered: dict = {}
-    with ExitStack() as stack:
-        if not drawing:
-            split = _Split(simulation_stream(case, options.detector, out_dir), log, keep)
-            for _ in _bar(split, case.steps + 1, log):
-                pass
-            dent = None
-        else:
-            if options.simulate_in_process or options.single_core:
-                dent = case.build_dentition()
-                split, where = _Split(simulation_stream(case, options.detector, out_dir, dentition=dent, shared=True), log, keep), "in this process"
-            else:
-                from orthosim.runtime.background import ChildProcessIterator, fork_is_safe
-
-                dent = None
-                if fork_is_safe():
-                    # fork: the child starts as a copy of this process, with the imports both
-                    # sides use done and the teeth loaded once; the step's own imports (numba,
-                    # the collision package) come after the fork in the child only, the renderer
-                    # (and its OpenGL context) in this process only
-                    t = time.perf_counter()
-                    _import_modules(_SHARED_MODULES)
-                    log.phase("imports", time.perf_counter() - t, "numpy, scipy, trimesh, FCL: once, for both processes")
-                    t = time.perf_counter()
-                    cached = case.dentition_is_cached()
-                    dent = case.build_dentition()
-                    dent.drop_mesh_caches()  # a build's leftovers: each process derives only what it uses
-                    log.phase("model", time.perf_counter() - t,
-                              f"{dent.description}, {'from the cache' if cached else 'built and cached'}")
-                if dent is not None and fork_is_safe():  # still no thread running after the build
-                    child = stack.enter_context(ChildProcessIterator(ignore_warnings=True, start_method="fork"))
-                    child.submit(simulation_stream, case, options.detector, out_dir, dentition=dent)
-                else:
-                    child = stack.enter_context(ChildProcessIterator(ignore_warnings=True, preload=_SIMULATION_MODULES))
-                    if dent is None and not case.dentition_is_cached():  # built once, here, and cached for the child
-                        t = time.perf_counter()
-                        dent = case.build_dentition()
-                        log.phase("model", time.perf_counter() - t, f"{dent.description}, built and cached")
-                    given = dent if dent is not None and not case.dentition_is_cached() else None  # unwritable cache
-                    child.submit(simulation_stream, case, options.detector, out_dir, dentition=given)
-                    dent = dent or case.build_dentition()
-                split, where = _Split(child, log, keep), "beside the drawing"
-            rendered = draw(dent, split, out_dir, options, extracted=frozenset(case.extractions), per_step=per_step,
-                            total=n_frames, progress=log.bars_shown, case=case)
-            log.phase("simulate", time.perf_counter() - split.simulation_started - rendered.get("encode_s", 0.0),
-                      f"{split.steps} steps, {rendered.get('frames', 0)} frames drawn (simulation {where})")
-            if "encode_s" in rendered:
-                log.phase("encode", rendered["encode_s"], ", ".join(Path(p).name for p in rendered.get("outputs", {}).values()))
+    if drawing:
+        split, dent, rendered = _simulate_and_draw(case, options, out_dir, draw, log, keep, per_step, n_frames)
+    else:
+        split, dent, rendered = _Split(simulation_stream(case, options.detector, out_dir), log, keep), None, {}
+        for _ in _bar(split, case.steps + 1, log):
+            pass
+        log.phase("simulate", time.perf_counter() - split.simulation_started, f"{split.steps} steps")
     if split.result is None:
         raise RuntimeError("the simulation ended without its report")
-    if not drawing:
-        log.phase("simulate", time.perf_counter() - split.simulation_started, f"{split.steps} steps")
-    t = time.perf_counter()
-    result = split.result
-    write_json(out_dir / "metrics.json", result.metrics)
-    write_text(out_dir / "distances.csv", result.distances_csv)
-    scenes = []
-    if options.export_scene:
-        from orthosim.exchange.scene_export import export_scenes
-
-        dent = dent or case.build_dentition()
-        scenes = export_scenes(dent, [posed[s] for s in sorted(posed)], set(case.extractions), out_dir / "scene",
-                               options.export_scene)
-    log.phase("write", time.perf_counter() - t, "metrics.json, distances.csv, distances_per_step.csv"
-              + (f", {len(scenes)} scene files" if scenes else ""))
+    scenes = _write_outputs(case, options, out_dir, split.result, dent, [posed[s] for s in sorted(posed)], log)
     log.timings_s["first_step_after_start"] = round(split.first_step_s or 0.0, 4)
     log.timings_s["total"] = round(process_age_s(), 4)
     extra = {
@@ -403,24 +245,70 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
         "options": {k: v for k, v in asdict(options).items() if k != "verbosity"},
         "frames_per_step": per_step,
         "timings_s": log.timings_s,
-        "model_files": result.model_files,
+        "model_files": split.result.model_files,
         "render": {k: v for k, v in rendered.items() if k != "encode_s"} if rendered else None,
         "scenes": [str(Path(p).relative_to(out_dir)) for p in scenes],  # relative: out_dir may be a staging folder
     }
+    from orthosim.runtime.runfolder import write_run_record
+
     record = write_run_record(out_dir, case.path, options.detector, extra)  # last: marks the run finished
-    m = result.metrics
-    start = m.get("initial_interpenetration") or []
-    initial = (f" beyond the {start[0]['mm']:.3f} mm the model starts with (teeth {start[0]['pair'][0]}-{start[0]['pair'][1]}"
-               f"{f' and {len(start) - 1} more pairs' if len(start) > 1 else ''})" if start else "")
-    line = (f"{case.name} ({options.detector}): {m['steps']} steps, total distance "
-            f"{m['total_distance_mm']['initial']:.2f} -> {m['total_distance_mm']['final']:.2f} mm, "
-            f"{m['collisions']} collisions, max penetration {m['max_penetration_mm']:.3f} mm{initial} "
-            f"-> {Path(shown_dir or out_dir)}/metrics.json")
+    line = summary_line(case, options.detector, split.result.metrics, Path(shown_dir or out_dir))
     if summary_to is not None and options.verbosity >= 1:
         summary_to(line)
     else:
         log.summary(line)
     return record
+
+
+def _simulate_and_draw(case, options: RunOptions, out_dir: Path, draw: Callable, log: RunLog, keep, per_step: int,
+                       n_frames: int):
+    """Simulate with the strategy the options ask for (`orthosim.runtime.strategies`) and draw every
+    record as it comes; returns the record splitter, the dentition drawn and what `draw` measured."""
+    from contextlib import ExitStack
+
+    from orthosim.runtime.strategies import choose_strategy
+
+    with ExitStack() as stack:
+        strategy = choose_strategy(options.simulate_in_process or options.single_core)
+        source = strategy.start(case, options.detector, out_dir, log, stack)
+        split = _Split(source.records, log, keep)
+        rendered = draw(source.dentition, split, out_dir, options, extracted=frozenset(case.extractions),
+                        per_step=per_step, total=n_frames, progress=log.bars_shown, case=case)
+        log.phase("simulate", time.perf_counter() - split.simulation_started - rendered.get("encode_s", 0.0),
+                  f"{split.steps} steps, {rendered.get('frames', 0)} frames drawn (simulation {source.where})")
+        if "encode_s" in rendered:
+            log.phase("encode", rendered["encode_s"], ", ".join(Path(p).name for p in rendered.get("outputs", {}).values()))
+    return split, source.dentition, rendered
+
+
+def _write_outputs(case, options: RunOptions, out_dir: Path, result, dent, posed: list, log: RunLog) -> list:
+    """metrics.json, distances.csv and the exported scenes (distances_per_step.csv and steps.jsonl
+    were streamed by the simulation); returns the scene files written."""
+    from orthosim.storage.atomic import write_json, write_text
+
+    t = time.perf_counter()
+    write_json(out_dir / "metrics.json", result.metrics)
+    write_text(out_dir / "distances.csv", result.distances_csv)
+    scenes = []
+    if options.export_scene:
+        from orthosim.exchange.scene_export import export_scenes
+
+        dent = dent or case.build_dentition()
+        scenes = export_scenes(dent, posed, set(case.extractions), out_dir / "scene", options.export_scene)
+    log.phase("write", time.perf_counter() - t, "metrics.json, distances.csv, distances_per_step.csv"
+              + (f", {len(scenes)} scene files" if scenes else ""))
+    return scenes
+
+
+def summary_line(case, detector: str, m: dict, shown: Path) -> str:
+    """The run's one summary line: distances, collisions, penetration beyond the model's own."""
+    start = m.get("initial_interpenetration") or []
+    initial = (f" beyond the {start[0]['mm']:.3f} mm the model starts with (teeth {start[0]['pair'][0]}-{start[0]['pair'][1]}"
+               f"{f' and {len(start) - 1} more pairs' if len(start) > 1 else ''})" if start else "")
+    return (f"{case.name} ({detector}): {m['steps']} steps, total distance "
+            f"{m['total_distance_mm']['initial']:.2f} -> {m['total_distance_mm']['final']:.2f} mm, "
+            f"{m['collisions']} collisions, max penetration {m['max_penetration_mm']:.3f} mm{initial} "
+            f"-> {shown}/metrics.json")
 
 
 def _bar(items: Iterable, total: int, log: RunLog) -> Iterator:

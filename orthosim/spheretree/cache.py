@@ -5,8 +5,10 @@ code, so the key is a SHA-256 of exactly those: the source text of the modules t
 (`_BUILDER_MODULES`) enters the key, so an edited builder never serves a tree an older one stored,
 and `BUILDER_VERSION` is bumped as well whenever a builder changes its output on purpose. A hit
 loads one small .npz in milliseconds; a miss builds and writes the file atomically, so two
-processes racing on the same tree both end with a whole file. The folder is `$ORTHOSIM_CACHE` if
-set, else `~/.cache/orthosim/spheretrees`.
+processes racing on the same tree both end with a whole file. Entries carry a checksum, their key
+and the entry format (`orthosim.storage.cacheentry`), and every load also checks the tree still
+bounds its mesh (`damage`): a damaged entry is named in one warning and rebuilt. The folder is
+`$ORTHOSIM_CACHE` if set, else `~/.cache/orthosim/spheretrees`.
 
 Left and right teeth are mirror images (x -> -x in the local frame, see `orthosim.model.tooth`), and a
 mirror maps a conservative tree to a conservative tree exactly (negating a float is exact), so a
@@ -21,7 +23,6 @@ import functools
 import hashlib
 import multiprocessing
 import os
-import warnings
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -29,13 +30,17 @@ from pathlib import Path
 
 import numpy as np
 
+from orthosim.errors import DamagedFileError
 from orthosim.storage.atomic import atomic_path
+from orthosim.storage.cacheentry import (ENTRY_FORMAT, HEADER, DamagedEntryWarning, damaged, read_arrays, warn_damaged,
+                                        write_arrays)
 from orthosim.runtime.lifeline import exit_with_parent
 from orthosim.storage.sourcedigest import source_digest
 from orthosim.spheretree.build import DEPTH, build_sphere_tree, check_request, default_branching, mesh_arrays
 from orthosim.spheretree.tree import SphereTree
 
 BUILDER_VERSION = 10
+ENTRY_KIND = "spheretree"
 # Modules whose code decides what a built tree holds: their source is part of the key.
 _BUILDER_MODULES = ("build", "fit", "octree", "enclose", "outside_band", "inside", "measure", "tree")
 _PACKAGE = Path(__file__).resolve().parent
@@ -54,36 +59,62 @@ def default_cache_dir() -> Path:
 
 def cache_key(vertices: np.ndarray, faces: np.ndarray, method: str, branching: int, depth: int) -> str:
     """Hex SHA-256 of the mesh's bytes (float64 vertices, int64 faces), the build request and the
-    builder (version and source, `builder_source_digest`)."""
+    builder (version and source, `builder_source_digest`) and the cache entry format."""
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(vertices, dtype=np.float64).tobytes())
     h.update(np.ascontiguousarray(faces, dtype=np.int64).tobytes())
-    h.update(f"|{method}|{branching}|{depth}|v{BUILDER_VERSION}|{builder_source_digest()}|{len(vertices)}|{len(faces)}".encode())
+    h.update(f"|{method}|{branching}|{depth}|v{BUILDER_VERSION}|{builder_source_digest()}|{len(vertices)}|{len(faces)}"
+             f"|entry{ENTRY_FORMAT}".encode())
     return h.hexdigest()
 
 
-def save_tree(tree: SphereTree, path: str | Path) -> None:
-    """Write a tree as .npz (atomically): per level c{k}, r{k}, p{k}, plus leaf_of_face."""
+def _tree_arrays(tree: SphereTree) -> dict[str, np.ndarray]:
     arrays = {"branching": np.int64(tree.branching), "method": np.str_(tree.method), "leaf_of_face": tree.leaf_of_face}
     for k in range(tree.depth):
         arrays[f"c{k}"], arrays[f"r{k}"], arrays[f"p{k}"] = tree.centers[k], tree.radii[k], tree.parents[k]
+    return arrays
+
+
+def _tree_from(arrays) -> SphereTree:
+    depth = sum(1 for name in arrays if name.startswith("c"))
+    return SphereTree(
+        branching=int(arrays["branching"]),
+        centers=tuple(arrays[f"c{k}"] for k in range(depth)),
+        radii=tuple(arrays[f"r{k}"] for k in range(depth)),
+        parents=tuple(arrays[f"p{k}"] for k in range(depth)),
+        leaf_of_face=arrays["leaf_of_face"],
+        method=str(arrays["method"]),
+    )
+
+
+def save_tree(tree: SphereTree, path: str | Path) -> None:
+    """Write a tree as .npz (atomically): per level c{k}, r{k}, p{k}, plus leaf_of_face (the export
+    format of `orthosim spheretree build --out`; cache entries add a checksum, `store_entry`)."""
     with atomic_path(path, suffix=".npz") as tmp:
         with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
+            np.savez(fh, **_tree_arrays(tree))
 
 
 def load_tree(path: str | Path) -> SphereTree:
-    """Read a tree written by `save_tree`."""
+    """Read a tree written by `save_tree` (or a cache entry, unverified: see `read_entry`)."""
     with np.load(path, allow_pickle=False) as z:
-        depth = sum(1 for name in z.files if name.startswith("c"))
-        return SphereTree(
-            branching=int(z["branching"]),
-            centers=tuple(z[f"c{k}"] for k in range(depth)),
-            radii=tuple(z[f"r{k}"] for k in range(depth)),
-            parents=tuple(z[f"p{k}"] for k in range(depth)),
-            leaf_of_face=z["leaf_of_face"],
-            method=str(z["method"]),
-        )
+        return _tree_from({name: z[name] for name in z.files if name != HEADER})
+
+
+def store_entry(tree: SphereTree, path: str | Path) -> None:
+    """Write a tree as a checksummed cache entry whose key is the file name's stem."""
+    write_arrays(path, ENTRY_KIND, Path(path).stem, _tree_arrays(tree))
+
+
+def read_entry(path: str | Path) -> SphereTree:
+    """The tree of a cache entry written by `store_entry`; FileNotFoundError when absent,
+    `DamagedFileError` when its header or checksum fails or its arrays are not a tree's."""
+    path = Path(path)
+    arrays = read_arrays(path, ENTRY_KIND, path.stem)
+    try:
+        return _tree_from(arrays)
+    except (KeyError, TypeError, ValueError) as err:
+        raise damaged(path, f"its arrays are not a sphere tree ({type(err).__name__}: {err})") from None
 
 
 _MIRROR = np.array([-1.0, 1.0, 1.0])
@@ -126,7 +157,7 @@ def _entry(mesh, method: str, branching: int, depth: int, folder: Path) -> _Entr
     return _Entry(folder / f"{cache_key(*stored, method, branching, depth)}.npz", flip, stored)
 
 
-class DamagedCacheWarning(UserWarning):
+class DamagedCacheWarning(DamagedEntryWarning):
     """A sphere-tree cache entry was unreadable or wrong; it is rebuilt (the message says which and why)."""
 
 
@@ -168,23 +199,21 @@ def damage(tree: SphereTree, vertices: np.ndarray, faces: np.ndarray, branching:
 def _load(entry: _Entry, branching: int, depth: int) -> SphereTree | None:
     """The stored tree, or None when absent or damaged (then rebuilt and overwritten, with a warning)."""
     try:
-        tree = load_tree(entry.path)
+        tree = read_entry(entry.path)
+        reason = damage(tree, *entry.mesh, branching, depth)
+        if reason is not None:
+            raise damaged(entry.path, reason)
     except FileNotFoundError:
         return None
-    except Exception as err:  # empty, truncated, garbage: numpy and zipfile raise many types (EOFError too)
-        reason = f"unreadable ({type(err).__name__}: {err})"
-    else:
-        reason = damage(tree, *entry.mesh, branching, depth)
-        if reason is None:
-            return tree
-    warnings.warn(f"sphere-tree cache entry {entry.path} is damaged: {reason}; rebuilding it", DamagedCacheWarning,
-                  stacklevel=3)
-    return None
+    except DamagedFileError as err:
+        warn_damaged("sphere-tree", err, DamagedCacheWarning, stacklevel=4)
+        return None
+    return tree
 
 
 def _store(tree: SphereTree, entry: _Entry) -> None:
     try:
-        save_tree(tree, entry.path)
+        store_entry(tree, entry.path)
     except OSError:
         pass  # a read-only or full cache folder costs a rebuild next time, never a failure
 

@@ -1,5 +1,6 @@
 """The staging outputs: stages.json (every tooth's pose at every stage), staging.csv (the staging
-chart: one row per tooth and stage, each movement component), ipr.csv, and the summary line.
+chart: one row per tooth and stage, each movement component), ipr.csv, movement.csv (the movement
+table), the summary line, and the numbers the staging page draws (`staging_chart`, `movement_table`).
 
 All written atomically (`orthosim.storage.atomic`); the caller writes run.json after them.
 """
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import io
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -23,11 +25,15 @@ IPR_COLUMNS = ("fdi_a", "fdi_b", "ipr_mm", "per_surface_mm", "before_stage", "ab
 
 
 def stages_record(plan: StagingPlan, case_file: str | Path | None = None) -> dict:
-    """The stages.json content: limits, counts, IPR, order constraints, and per stage FDI -> pose
-    (4x4 row-major nested lists, local -> arch frame, mm)."""
+    """The stages.json content: the case (absolute path and SHA-256, so `stage verify` finds it and
+    knows it unchanged), limits, counts, IPR, order constraints, and per stage FDI -> pose (4x4
+    row-major nested lists, local -> arch frame, mm)."""
+    from orthosim.runtime.runfolder import file_sha256
+
     return {
         "orthosim_version": __version__,
-        "case_file": None if case_file is None else str(case_file),
+        "case_file": None if case_file is None else str(Path(case_file).resolve()),
+        "case_sha256": None if case_file is None else file_sha256(case_file),
         "limits": {f"{c}_{UNITS[c]}": float(getattr(plan.limits, c)) for c in COMPONENTS},
         "stages": plan.n_stages,
         "lower_bound": plan.lower_bound,
@@ -70,6 +76,8 @@ def write_outputs(plan: StagingPlan, out_dir: str | Path, case_file: str | Path 
     paths = {"chart": out_dir / "staging.csv", "ipr": out_dir / "ipr.csv", "stages": out_dir / "stages.json"}
     write_text(paths["chart"], chart_csv(plan))
     write_text(paths["ipr"], ipr_csv(plan))
+    paths["movement"] = out_dir / "movement.csv"
+    write_text(paths["movement"], movement_csv(plan))
     write_json(paths["stages"], stages_record(plan, case_file))
     return paths
 
@@ -87,3 +95,55 @@ def max_stage_components(plan: StagingPlan) -> np.ndarray:
     """(6,) the largest absolute stage component of any tooth (mm, mm, mm, deg, deg, deg)."""
     c = plan.stage_components()
     return np.abs(c).reshape(-1, len(COMPONENTS)).max(axis=0) if c.size else np.zeros(len(COMPONENTS))
+
+
+@dataclass(frozen=True)
+class MovementRow:
+    """One tooth's whole movement: the movement table's row."""
+
+    fdi: int
+    totals: np.ndarray  # (6,) COMPONENTS order: mm, mm, mm, deg, deg, deg
+    stages_moving: int  # stages in which the tooth moves at all
+    first_stage: int | None  # first and last stage that move it (None: it stays)
+    last_stage: int | None
+
+
+def movement_table(plan: StagingPlan) -> list[MovementRow]:
+    """Per staged tooth in FDI order, its total movement per component and the stages it moves in."""
+    moves = np.diff(plan.progress, axis=0) > 0  # (stages, teeth)
+    rows = []
+    for n in sorted(plan.teeth):
+        i = plan.teeth.index(n)
+        ks = np.flatnonzero(moves[:, i]) + 1
+        rows.append(MovementRow(n, plan.totals[i].copy(), len(ks), int(ks[0]) if len(ks) else None,
+                                int(ks[-1]) if len(ks) else None))
+    return rows
+
+
+def movement_csv(plan: StagingPlan) -> str:
+    """movement.csv: the movement table (one row per tooth, FDI order)."""
+    out = io.StringIO()
+    w = csv.writer(out, lineterminator="\n")
+    w.writerow(("fdi",) + tuple(f"{c}_{UNITS[c]}" for c in COMPONENTS) + ("stages_moving", "first_stage", "last_stage"))
+    for r in movement_table(plan):
+        w.writerow([r.fdi, *(f"{v:.4f}" for v in r.totals), r.stages_moving, r.first_stage or "", r.last_stage or ""])
+    return out.getvalue()
+
+
+@dataclass(frozen=True, eq=False)
+class StagingChart:
+    """The staging chart's numbers: teeth (rows, FDI order) by stages (columns 1..N)."""
+
+    teeth: tuple[int, ...]
+    amounts: np.ndarray  # (teeth, stages, 6) each stage's movement, COMPONENTS order (mm, mm, mm, deg, deg, deg)
+    limit_use: np.ndarray  # (teeth, stages) the largest |component| / its limit: 0 stays, 1 a full stage
+    held: frozenset[tuple[int, int]]  # (stage, FDI) held back to avoid a contact
+    ipr: tuple[tuple[int, int, int, float], ...]  # (stage done before, FDI a, FDI b, mm)
+
+
+def staging_chart(plan: StagingPlan) -> StagingChart:
+    order = [plan.teeth.index(n) for n in sorted(plan.teeth)]
+    comps = plan.stage_components()[:, order, :].transpose(1, 0, 2)  # (teeth, stages, 6)
+    use = (np.abs(comps) / plan.limits.array()[None, None, :]).max(axis=2) if comps.size else np.zeros((len(order), 0))
+    return StagingChart(tuple(sorted(plan.teeth)), comps, use, frozenset(plan.held),
+                        tuple((1, r.a, r.b, float(r.amount_mm)) for r in plan.ipr))

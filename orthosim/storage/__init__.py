@@ -1,4 +1,5 @@
-"""Bytes on disk: atomic writes and the source digests that key caches.
+"""Bytes on disk: atomic writes, checksummed cache entries and the source digests that key caches.
 
-`atomic` (write beside, then rename), `sourcedigest` (cache keys that change with the code).
+`atomic` (write beside, then rename), `cacheentry` (every cache's entries: format, key and SHA-256,
+verified on read), `sourcedigest` (cache keys that change with the code).
 """

@@ -17,6 +17,7 @@ import numpy as np
 
 from orthosim.exchange.case import load_case
 from orthosim.analysis.contacttable import ContactParts, PairContact, StepContacts, contact_table
+from orthosim.analysis.evidence.matching import evidence_for_case
 from orthosim.collision.detectors import DETECTORS as DETECTOR_ORDER
 from orthosim.analysis.distancemap import DistanceMapModel, ToothDistances
 from orthosim.errors import OrthosimError
@@ -46,6 +47,7 @@ class CaseData:
     bolton: dict | None = None
     widths_mm: dict[int, float] = field(default_factory=dict)
     fits: dict[int, object] = field(default_factory=dict)  # FDI -> FitReport
+    evidence: list = field(default_factory=list)  # EvidenceMatch: the evidence rows the case's force systems fall under
 
     @property
     def detectors(self) -> list[str]:
@@ -114,6 +116,7 @@ def gather_case(runs: Sequence[RunData], dentitions: dict | None = None, fits: b
             raise ReportInputError(r.run_dir, "metrics.json", f"starts from other poses than {first.run_dir}",
                                    "give runs of the same case, written by this orthosim version")
     data.poses["initial"] = initial
+    data.evidence = evidence_for_case(case)
     for r in runs:
         data.poses[r.detector] = r.final_poses
     model = _distance_model(dent, dentitions)

@@ -58,6 +58,7 @@ def case_record(data: CaseData, images: dict) -> dict:
                       for n, t in m["teeth"].items()},
             "totals_over_days": [{"day": s["time_days"], "total_mm": s["total_distance_mm"]} for s in r.steps],
             "final_day": r.steps[-1]["time_days"],
+            "bite": m.get("bite"),
         }
     throughput = {}
     for det, r in data.runs.items():
@@ -90,6 +91,7 @@ def case_record(data: CaseData, images: dict) -> dict:
         "sphere_tree_fit": fits,
         "sphere_tree_fit_mean_sov_sum": (sum(f["sov_sum"] for f in fits.values()) / len(fits)) if fits else None,
         "throughput": throughput,
+        "evidence_rows": [{"id": m.row_id, "topic": m.topic, "why": m.why} for m in data.evidence],
         "images": images,
     }
 

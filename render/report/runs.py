@@ -63,6 +63,7 @@ def read_run(run_dir: str | Path) -> RunData:
                        "touching": [tuple(int(x) for x in p) for p in s["touching"]],
                        "total_distance_mm": float(s["total_distance_mm"])} for s in read_steps(run_dir))
         figures = {k: m[k] for k in FIGURES}
+        figures["bite"] = m.get("bite")  # runs that close the bite (orthosim.movement.closure) only
         case_name, step_days, duration = str(m["case"]), float(m["step_days"]), float(m["duration_days"])
         extracted = tuple(int(n) for n in m["extracted"])
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:

@@ -9,7 +9,13 @@ uniform vec3 marker_emissive;
 in vec3 center_view;
 in float radius;
 
+#ifdef LABEL_TARGET
+flat in float label_id;
+layout(location = 0) out vec4 frag_color;
+layout(location = 1) out vec4 label_color;  // as in gouraud.frag
+#else
 out vec4 frag_color;
+#endif
 
 void main()
 {
@@ -28,4 +34,9 @@ void main()
     float ndl = max(dot(n, normalize(vec3(-0.45, 0.55, 0.70))), 0.0);
     vec3 rgb = marker_color.rgb * (0.35 + 0.75 * ndl) + marker_emissive;
     frag_color = vec4(clamp(rgb, 0.0, 1.0), marker_color.a);
+#ifdef LABEL_TARGET
+    float id = floor(label_id + 0.5);
+    float high = floor(id / 256.0);
+    label_color = vec4((id - 256.0 * high) / 255.0, high / 255.0, 0.0, 1.0);
+#endif
 }

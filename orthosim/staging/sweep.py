@@ -1,0 +1,214 @@
+"""Two teeth moving through one aligner stage: their exact distance along the motion, bounded.
+
+Each tooth moves from its pose at one stage to its pose at the next by the motion law the
+continuous detector assumes (`orthosim.geometry.motion`: the local origin on a straight line,
+rotation at constant angular velocity about it). Every vertex of tooth a then moves at most
+|v_a| + theta_a rho_a per unit of stage time (v_a the origin's displacement over the stage,
+theta_a the angle turned, rho_a the farthest vertex from the local origin), so the distance
+between the two meshes changes at most at mu = |v_a - v_b| + theta_a rho_a + theta_b rho_b mm
+per unit time (`relative_speed_bound`). Two answers rest on that bound and on FCL's exact mesh
+distance at chosen times:
+
+- `min_clearance`: the least distance over the stage, by branch and bound: on [t0, t1] the
+  distance is at least (d(t0) + d(t1) - mu (t1 - t0)) / 2, so intervals whose bound cannot beat
+  the best sample by more than the tolerance are dropped. The answer is a sampled distance
+  (an upper bound on the true minimum) and a proven lower bound within `tolerance_mm` of it.
+- `first_contact_on_grid`: dense sampling for the independent check (`stage verify`): times
+  spaced so that no vertex moves more than `step_mm` relative to the other tooth between two
+  samples, each sample either tested with FCL's intersection test or proven apart by an FCL
+  distance at an earlier sample (d > mu (t' - t)). An intersection deeper than step_mm / 2 at
+  any time lies within step_mm / 2 of a sample's relative pose, so it is found there.
+
+Units: mm, poses (4, 4) local -> arch frame; times are fractions 0..1 of the stage.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from orthosim.geometry import meshquery
+from orthosim.geometry.motion import PosePath, chord_deviation_bound, relative_speed_bound, rotation_angle
+
+
+@dataclass(frozen=True)
+class Clearance:
+    """The least distance (mm) between two teeth over a stage's motion."""
+
+    min_mm: float  # smallest sampled distance (0.0: the meshes intersect at `time`)
+    lower_bound_mm: float  # proven: the distance never falls below this during the stage
+    time: float  # fraction 0..1 of the stage where min_mm was found
+    samples: int  # FCL distance queries made
+
+
+class PairMotion:
+    """Teeth a and b over one stage: FCL objects of their meshes (shared, re-posed on each query),
+    the farthest vertex of each from its local origin (mm), and both motions (4, 4) T0 -> T1.
+
+    At t = 0 and t = 1 the end poses themselves are used (bit for bit, not re-interpolated), and
+    distances there are kept in `memo` (shared by the caller across stages, keyed by the two
+    poses' bytes): a stage's end is the next one's start, and teeth at rest keep their poses."""
+
+    def __init__(self, obj_a, rho_a: float, Ta0, Ta1, obj_b, rho_b: float, Tb0, Tb1, memo: dict | None = None):
+        self.obj_a, self.obj_b = obj_a, obj_b
+        self.path_a, self.path_b = PosePath(Ta0, Ta1), PosePath(Tb0, Tb1)
+        self.mu = relative_speed_bound(Ta0, Ta1, rho_a, Tb0, Tb1, rho_b)  # mm per unit stage time
+        self.memo = {} if memo is None else memo
+        self.queries = 0
+
+    def _poses(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        if t == 1.0:
+            return self.path_a.T1, self.path_b.T1
+        return self.path_a.at(t), self.path_b.at(t)
+
+    def intersects(self, t: float) -> bool:
+        Ta, Tb = self._poses(t)
+        meshquery.set_pose(self.obj_a, Ta)
+        meshquery.set_pose(self.obj_b, Tb)
+        self.queries += 1
+        return meshquery.collide(self.obj_a, self.obj_b)[0]
+
+    def distance(self, t: float) -> float:
+        """mm between the meshes at time t (0.0 when they intersect)."""
+        Ta, Tb = self._poses(t)
+        key = (id(self.obj_a), id(self.obj_b), Ta.tobytes(), Tb.tobytes()) if t in (0.0, 1.0) else None
+        if key is not None and key in self.memo:
+            return self.memo[key]
+        meshquery.set_pose(self.obj_a, Ta)
+        meshquery.set_pose(self.obj_b, Tb)
+        self.queries += 1
+        d = meshquery.distance(self.obj_a, self.obj_b)
+        if key is not None:
+            self.memo[key] = d
+        return d
+
+
+def min_clearance(motion: PairMotion, tolerance_mm: float = 1e-3, reach_mm: float = math.inf) -> Clearance:
+    """The least distance over the stage to within `tolerance_mm` (see the module docstring).
+
+    reach_mm: stop as soon as the pair is proven never to come within this distance (the
+    answer's lower bound then exceeds reach_mm, and min_mm is the best sample so far).
+    """
+    d0 = motion.distance(0.0)
+    mu = motion.mu
+    if mu <= 0.0:  # no relative motion: the distance is constant
+        return Clearance(d0, d0, 0.0, motion.queries)
+    d1 = motion.distance(1.0)
+    best, best_t = (d0, 0.0) if d0 <= d1 else (d1, 1.0)
+    heap = [(0.5 * (d0 + d1 - mu), 0.0, 1.0, d0, d1)]
+    lower = heap[0][0]
+    while heap:
+        lb, a, b, da, db = heapq.heappop(heap)
+        lower = lb
+        if best == 0.0 or lb >= best - tolerance_mm or lb > reach_mm:
+            break
+        m = 0.5 * (a + b)
+        dm = motion.distance(m)
+        if dm < best:
+            best, best_t = dm, m
+        for lo, hi, dlo, dhi in ((a, m, da, dm), (m, b, dm, db)):
+            heapq.heappush(heap, (0.5 * (dlo + dhi - mu * (hi - lo)), lo, hi, dlo, dhi))
+    else:
+        lower = best
+    lower = 0.0 if best == 0.0 else min(best, max(lower, 0.0))
+    return Clearance(best, lower, best_t, motion.queries)
+
+
+def grid_size(mu_mm: float, step_mm: float) -> int:
+    """Intervals of the sampling grid: the fewest with no vertex moving more than step_mm relative
+    to the other tooth between two samples (at least 1)."""
+    return max(1, math.ceil(mu_mm / step_mm))
+
+
+def first_contact_on_grid(motion: PairMotion, step_mm: float) -> float | None:
+    """The first sampled time (0..1) at which the meshes intersect, or None; every sample of the
+    grid `grid_size(mu, step_mm)` is tested or proven apart (see the module docstring)."""
+    n = grid_size(motion.mu, step_mm)
+    i = 0
+    while i <= n:
+        t = i / n
+        if motion.intersects(t):
+            return t
+        if i == n or motion.mu <= 0.0:
+            return None
+        d = motion.distance(t)
+        # samples i + j with j * mu / n < d are proven apart by this distance
+        i += max(1, math.ceil(d * n / motion.mu))
+    return None
+
+
+def rho_of(mesh) -> float:
+    """mm: the farthest vertex of a mesh (local frame) from its local origin."""
+    return float(np.linalg.norm(np.asarray(mesh.vertices, float), axis=1).max())
+
+
+def closest_approach(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> float:
+    """mm: the least distance between two points moving on straight lines at constant speed over
+    the stage, a0 -> a1 and b0 -> b1 ((3,) mm each), at the same times."""
+    d0 = np.asarray(a0, float) - np.asarray(b0, float)
+    d1 = np.asarray(a1, float) - np.asarray(b1, float)
+    v = d1 - d0
+    vv = float(v @ v)
+    t = 0.0 if vv == 0.0 else min(1.0, max(0.0, -float(d0 @ v) / vv))
+    return float(np.linalg.norm(d0 + t * v))
+
+
+Shifts = dict  # (FDI a, FDI b) -> ((3,) mm, (3,) mm): offsets of a and b when that pair is tested (IPR)
+
+
+class ToothBodies:
+    """The staged teeth as exact bodies: one FCL object per tooth (re-posed on each query) and its
+    rho (mm), for any pair's motion over any stage.
+
+    shifts: (FDI a, FDI b) -> ((3,) mm, (3,) mm) arch-frame offsets added to a's and b's positions
+    whenever that pair (and only that pair) is measured: how interproximal reduction is modelled
+    (`orthosim.staging.ipr`). Given once per pair in either order.
+    """
+
+    def __init__(self, meshes: dict, shifts: Shifts | None = None):
+        self.objects = {n: meshquery.fcl_object(m) for n, m in meshes.items()}
+        self.rho = {n: rho_of(m) for n, m in meshes.items()}
+        # a bounding sphere per tooth about its box centre (local frame), for the pair filter
+        self.centre = {n: np.asarray(m.bounds, float).mean(axis=0) for n, m in meshes.items()}
+        self.radius = {n: float(np.linalg.norm(np.asarray(m.vertices, float) - self.centre[n], axis=1).max())
+                       for n, m in meshes.items()}
+        self.memo: dict = {}  # end-of-stage distances, shared by every PairMotion made here
+        self.shifts: Shifts = {}
+        for (a, b), (sa, sb) in (shifts or {}).items():
+            self.shifts[(a, b)] = (np.asarray(sa, float), np.asarray(sb, float))
+            self.shifts[(b, a)] = (np.asarray(sb, float), np.asarray(sa, float))
+
+    def motion(self, a: int, b: int, P0: dict, P1: dict, shifted: bool = True) -> PairMotion:
+        """Teeth a and b moving from poses P0 to P1 (FDI -> (4, 4)), shifted by their IPR if any."""
+        Ta0, Ta1, Tb0, Tb1 = (np.array(T, float) for T in (P0[a], P1[a], P0[b], P1[b]))
+        s = self.shifts.get((a, b)) if shifted else None
+        if s is not None:
+            for T in (Ta0, Ta1):
+                T[:3, 3] += s[0]
+            for T in (Tb0, Tb1):
+                T[:3, 3] += s[1]
+        return PairMotion(self.objects[a], self.rho[a], Ta0, Ta1, self.objects[b], self.rho[b], Tb0, Tb1, self.memo)
+
+    def near_pairs(self, P0: dict, P1: dict, reach_mm: float) -> list[tuple[int, int]]:
+        """(a, b) with a < b of every pair that may come within reach_mm of each other during the
+        motion P0 -> P1 (FDI -> (4, 4)). Each tooth's bounding-sphere centre strays from its chord
+        by at most `chord_deviation_bound` (`geometry.motion`), so a pair whose chords never come
+        within the two radii, both deviations, reach_mm and its IPR shift of each other cannot."""
+        teeth = sorted(self.objects)
+        ends, slack = {}, {}
+        for n in teeth:
+            T0, T1 = np.asarray(P0[n], float), np.asarray(P1[n], float)
+            c = self.centre[n]
+            ends[n] = (T0[:3, :3] @ c + T0[:3, 3], T1[:3, :3] @ c + T1[:3, 3])
+            slack[n] = self.radius[n] + float(chord_deviation_bound(rotation_angle(T0, T1), np.linalg.norm(c)))
+        out = []
+        for i, a in enumerate(teeth):
+            for b in teeth[i + 1:]:
+                s = self.shifts.get((a, b))
+                shift = 0.0 if s is None else float(np.linalg.norm(s[0]) + np.linalg.norm(s[1]))
+                if closest_approach(*ends[a], *ends[b]) <= slack[a] + slack[b] + reach_mm + shift:
+                    out.append((a, b))
+        return out
