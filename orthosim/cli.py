@@ -214,6 +214,7 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--no-staging", is_flag=True, help="Skip timing the aligner staging planner (shipped staging cases, 28-tooth set-up).")
 @click.option("--no-batch", is_flag=True, help="Skip `orthosim batch` animations per minute with 1 and 2 workers (minutes).")
 @click.option("--no-report", is_flag=True, help="Skip timing `orthosim report` of the paper's three cases.")
+@click.option("--no-scan", is_flag=True, help="Skip a 300k-triangle labelled arch scan made ready to simulate, cold and warm.")
 @click.option("--no-memory", is_flag=True, help="Skip the peak memory of a 10,000-step run and a 2,000-frame render (minutes).")
 @click.option("--report-runs", type=click.Path(path_type=Path), default=Path("out/bench/report-runs"), show_default=True,
               help="Where the report's runs are made once and kept for later benches.")
@@ -225,7 +226,7 @@ def check(cases: tuple[Path, ...]) -> None:
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
           no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool,
           no_staging: bool, no_batch: bool, no_report: bool, report_runs: Path, no_memory: bool, labels: bool,
-          closure_case: Path | None) -> None:
+          closure_case: Path | None, no_scan: bool) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -238,7 +239,7 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
                        step_days=step_days, tree_build=not no_tree_build, startup=not no_startup,
                        staging=not no_staging, batch=not no_batch, report=not no_report, report_runs=report_runs,
-                       memory=not no_memory, run_case=run_case, labels=labels)
+                       memory=not no_memory, run_case=run_case, labels=labels, scan=not no_scan)
     if closure_case is not None:
         from orthosim_bench.closure import closure_timings
 
@@ -532,11 +533,11 @@ def _render_steps(dent, records, out_dir: Path, options: RunOptions, *, extracte
     """Draw every simulated step (`per_step` frames each) into out_dir: frames, animation, split views,
     with the overlay (case, detector, day N of M, legend, FDI labels on request) unless --no-overlay."""
     from orthosim_render.animation import render_run
-    from orthosim_render.overlay import FrameCaption
+    from orthosim_render.overlay import FrameCaption, model_legend
     from orthosim_render.timeline import frames_from_steps
 
-    caption = FrameCaption(case.name, options.detector, case.step_days, case.duration_days,
-                           labels=options.labels) if options.overlay else None
+    caption = FrameCaption(case.name, options.detector, case.step_days, case.duration_days, labels=options.labels,
+                           extra_legend=model_legend(dent, options.hide_roots)) if options.overlay else None
     frames = frames_from_steps(records, extracted, per_step)
     return render_run(dent, frames, out_dir, views=options.views, size=options.size, gif=options.gif, alpha=options.alpha,
                       hide_roots=options.hide_roots, color_contact_faces=options.contact_faces, fps=options.fps,

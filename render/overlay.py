@@ -19,7 +19,8 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
-from orthosim_render.scene import BACKGROUND, CONTACT_COLOR, CROWN_COLOR, MOVING_TINT
+from orthosim_render.scene import (BACKGROUND, CONTACT_COLOR, CROWN_COLOR, ESTIMATED_ROOT_COLOR, GINGIVA_COLOR,
+                                  MOVING_TINT)
 
 TEXT_COLOR = (236, 238, 242)
 PANEL_COLOR = (16, 18, 24, 178)  # translucent dark panel behind text (RGBA)
@@ -36,6 +37,18 @@ MOVING_RGB = _rgb8(np.multiply(CROWN_COLOR, MOVING_TINT))
 CONTACT_RGB = _rgb8(CONTACT_COLOR)
 BACKGROUND_RGB = _rgb8(BACKGROUND)
 LEGEND = (("moving", MOVING_RGB, "box"), ("contact", CONTACT_RGB, "box"), ("extracted (gap)", GAP_COLOR, "ring"))
+
+
+def model_legend(dentition, hide_roots: bool = False) -> tuple:
+    """Legend entries the model itself asks for: estimated roots and a scanned gum, when drawn."""
+    if hide_roots:
+        return ()
+    items = []
+    if any(t.root_kind == "estimated" for t in dentition.teeth.values()):
+        items.append(("estimated root", _rgb8(ESTIMATED_ROOT_COLOR), "box"))
+    if dentition.gingiva:
+        items.append(("gum (scan)", _rgb8(GINGIVA_COLOR), "box"))
+    return tuple(items)
 
 
 @lru_cache(maxsize=8)
@@ -162,6 +175,7 @@ class FrameCaption:
     duration_days: float  # the treatment's length, the M of "day N of M"
     labels: bool = False  # FDI numbers on the crowns
     legend: bool = True
+    extra_legend: tuple = ()  # (text, rgb8, "box" | "ring") after the usual entries, e.g. `model_legend`
 
     def day_text(self, step: int) -> str:
         day = step * self.step_days
@@ -222,7 +236,7 @@ def draw_caption(image: np.ndarray, caption: FrameCaption, step: int, font_px: i
     day = text_patch(caption.day_text(step), px)
     blend(image, day, w - day.shape[1] - m, m)
     if caption.legend:
-        leg = legend_patch(max(9, px - 2))
+        leg = legend_patch(max(9, px - 2), LEGEND + tuple(caption.extra_legend))
         blend(image, leg, m, h - leg.shape[0] - m)
     return image
 

@@ -145,7 +145,7 @@ def _lean_renderer_class(pyrender, GL):
             GL.glEnable(GL.GL_DEPTH_TEST)
             GL.glDepthMask(GL.GL_TRUE)
             GL.glDepthFunc(GL.GL_LESS)
-            GL.glDisable(GL.GL_BLEND)  # every surface we draw is opaque
+            GL.glDisable(GL.GL_BLEND)  # opaque surfaces; _draw blends the translucent gum on its own
             GL.glPolygonMode(GL.GL_FRONT_AND_BACK, GL.GL_FILL)
             if clear_color is not None:
                 GL.glClearColor(*clear_color)
@@ -168,54 +168,69 @@ def _lean_renderer_class(pyrender, GL):
             return VP, cam_pos, lights
 
         def _draw(self, scene, nodes, VP, cam_pos, lights) -> None:
-            """Draw `nodes` ((node, pose) pairs, already in draw order): surfaces, then marker sprites."""
-            bound_program = None
-            cull = None
-            sprites = []
+            """Draw `nodes` ((node, pose) pairs, already in draw order): opaque surfaces, then the
+            translucent ones (the gum: blended, not writing depth), then marker sprites."""
+            bound = {"program": None, "cull": None}
+            sprites, translucent = [], []
             for node, pose in nodes:
                 M = np.ascontiguousarray(pose.T, dtype=np.float32)
                 for primitive in node.mesh.primitives:
                     if primitive.mode == pyrender.GLTF.POINTS:
                         sprites.append((primitive, M))  # after the opaque surfaces they sit on
-                        continue
-                    program = self._program_for(primitive, len(lights))
-                    if program is not bound_program:
-                        program._bind()
-                        bound_program = program
-                        GL.glUniformMatrix4fv(self._loc(program, "V"), 1, GL.GL_FALSE, VP[0])
-                        GL.glUniformMatrix4fv(self._loc(program, "P"), 1, GL.GL_FALSE, VP[1])
-                        GL.glUniform3fv(self._loc(program, "cam_pos"), 1, cam_pos)
-                        GL.glUniform3fv(self._loc(program, "ambient_light"), 1,
-                                        np.asarray(scene.ambient_light, np.float32))
-                        GL.glUniform1i(self._loc(program, "n_directional_lights"), len(lights))
-                        for i, (direction, colour, intensity) in enumerate(lights):
-                            b = f"directional_lights[{i}]."
-                            GL.glUniform3fv(self._loc(program, b + "direction"), 1, direction.astype(np.float32))
-                            GL.glUniform3fv(self._loc(program, b + "color"), 1, np.asarray(colour, np.float32))
-                            GL.glUniform1f(self._loc(program, b + "intensity"), intensity)
-                    material = primitive.material
-                    GL.glUniformMatrix4fv(self._loc(program, "M"), 1, GL.GL_FALSE, M)
-                    GL.glUniform4fv(self._loc(program, "material.base_color_factor"), 1,
-                                    np.asarray(material.baseColorFactor, np.float32))
-                    GL.glUniform3fv(self._loc(program, "material.emissive_factor"), 1,
-                                    np.asarray(material.emissiveFactor, np.float32))
-                    GL.glUniform1f(self._loc(program, "material.roughness_factor"), float(material.roughnessFactor))
-                    if self.label_ids is not None:
-                        label = self.label_ids.get(node, 0)
-                        GL.glUniform2f(self._loc(program, "label_rg"), (label % 256) / 255.0, (label // 256) / 255.0)
-                    want_cull = not material.doubleSided
-                    if want_cull != cull:
-                        (GL.glEnable if want_cull else GL.glDisable)(GL.GL_CULL_FACE)
-                        GL.glCullFace(GL.GL_BACK)
-                        cull = want_cull
-                    GL.glBindVertexArray(primitive._vaid)
-                    n_instances = 1 if primitive.poses is None else len(primitive.poses)
-                    GL.glDrawElementsInstanced(primitive.mode, primitive.indices.size, GL.GL_UNSIGNED_INT,
-                                               None, n_instances)
+                    elif primitive.material.alphaMode == "BLEND":
+                        translucent.append((node, primitive, M))  # over everything opaque, seen through
+                    else:
+                        self._draw_primitive(scene, node, primitive, M, VP, cam_pos, lights, bound)
+            if translucent:
+                GL.glEnable(GL.GL_BLEND)
+                GL.glBlendFunc(GL.GL_SRC_ALPHA, GL.GL_ONE_MINUS_SRC_ALPHA)
+                GL.glDepthMask(GL.GL_FALSE)
+                for node, primitive, M in translucent:
+                    self._draw_primitive(scene, node, primitive, M, VP, cam_pos, lights, bound)
+                GL.glDepthMask(GL.GL_TRUE)
+                GL.glDisable(GL.GL_BLEND)
             if sprites:
                 self._draw_sprites(sprites, VP)
             GL.glBindVertexArray(0)
             GL.glUseProgram(0)
+
+        def _draw_primitive(self, scene, node, primitive, M, VP, cam_pos, lights, bound: dict) -> None:
+            """One surface primitive of `node` at model matrix `M`; `bound` keeps the bound program and culling
+            across calls."""
+            program = self._program_for(primitive, len(lights))
+            if program is not bound["program"]:
+                program._bind()
+                bound["program"] = program
+                GL.glUniformMatrix4fv(self._loc(program, "V"), 1, GL.GL_FALSE, VP[0])
+                GL.glUniformMatrix4fv(self._loc(program, "P"), 1, GL.GL_FALSE, VP[1])
+                GL.glUniform3fv(self._loc(program, "cam_pos"), 1, cam_pos)
+                GL.glUniform3fv(self._loc(program, "ambient_light"), 1,
+                                np.asarray(scene.ambient_light, np.float32))
+                GL.glUniform1i(self._loc(program, "n_directional_lights"), len(lights))
+                for i, (direction, colour, intensity) in enumerate(lights):
+                    b = f"directional_lights[{i}]."
+                    GL.glUniform3fv(self._loc(program, b + "direction"), 1, direction.astype(np.float32))
+                    GL.glUniform3fv(self._loc(program, b + "color"), 1, np.asarray(colour, np.float32))
+                    GL.glUniform1f(self._loc(program, b + "intensity"), intensity)
+            material = primitive.material
+            GL.glUniformMatrix4fv(self._loc(program, "M"), 1, GL.GL_FALSE, M)
+            GL.glUniform4fv(self._loc(program, "material.base_color_factor"), 1,
+                            np.asarray(material.baseColorFactor, np.float32))
+            GL.glUniform3fv(self._loc(program, "material.emissive_factor"), 1,
+                            np.asarray(material.emissiveFactor, np.float32))
+            GL.glUniform1f(self._loc(program, "material.roughness_factor"), float(material.roughnessFactor))
+            if self.label_ids is not None:
+                label = self.label_ids.get(node, 0)
+                GL.glUniform2f(self._loc(program, "label_rg"), (label % 256) / 255.0, (label // 256) / 255.0)
+            want_cull = not material.doubleSided
+            if want_cull != bound["cull"]:
+                (GL.glEnable if want_cull else GL.glDisable)(GL.GL_CULL_FACE)
+                GL.glCullFace(GL.GL_BACK)
+                bound["cull"] = want_cull
+            GL.glBindVertexArray(primitive._vaid)
+            n_instances = 1 if primitive.poses is None else len(primitive.poses)
+            GL.glDrawElementsInstanced(primitive.mode, primitive.indices.size, GL.GL_UNSIGNED_INT,
+                                       None, n_instances)
 
         def _forward_pass(self, scene, flags, seg_node_map=None):
             VP, cam_pos, lights = self._frame_constants(scene)

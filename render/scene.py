@@ -35,6 +35,9 @@ from orthosim_render.gl import load_pyrender
 # lit tooth surface can produce.
 CROWN_COLOR = (0.94, 0.90, 0.80)
 ROOT_COLOR = (0.70, 0.75, 0.84)
+ESTIMATED_ROOT_COLOR = (0.86, 0.74, 0.52)  # an estimated root (crown-only input): warm sand, never a scanned root's blue-grey
+GINGIVA_COLOR = (0.86, 0.45, 0.50)  # scanned gum: pink
+GINGIVA_ALPHA = 0.45  # translucent, so the roots stay visible through it
 MOVING_TINT = (0.66, 1.00, 0.80)  # multiplies the tooth's colours
 CONTACT_COLOR = (1.00, 0.04, 0.32)
 BACKGROUND = (0.10, 0.11, 0.14)  # dark slate, like the black card of intra-oral photographs
@@ -66,7 +69,8 @@ def used_vertices(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.nd
     return np.flatnonzero(mark), slot[faces]
 
 
-def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: bool, smooth_cej: bool = True):
+def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: bool, smooth_cej: bool = True,
+                   root_color: tuple = ROOT_COLOR):
     """Vertices duplicated along the CEJ so crown and root faces get their own colour.
 
     smooth_cej: triangles straddling the CEJ plane are cut along it (`orthosim_render.cej`), so the line is
@@ -96,7 +100,7 @@ def _split_by_part(mesh: trimesh.Trimesh, face_part: np.ndarray, hide_roots: boo
         used, inverse = used_vertices(faces.reshape(-1), len(cut.vertices))
         pos.append(cut.vertices[used])
         nrm.append(cut.normals[used])
-        colour = CROWN_COLOR if part == CROWN else ROOT_COLOR
+        colour = CROWN_COLOR if part == CROWN else root_color
         col.append(np.tile([*colour, 1.0], (len(used), 1)))
         idx.append(inverse.reshape(-1, 3) + offset)
         source_face.append(cut.source_face[chosen])
@@ -115,7 +119,8 @@ class _ToothDrawable:
     def __init__(self, pyrender, fdi: int, tooth, hide_roots: bool, keep_kdtree: bool, smooth_cej: bool = True):
         self.fdi = fdi
         self.arch = arch_of(fdi)
-        pos, nrm, col, idx, origin = _split_by_part(tooth.mesh, tooth.face_part, hide_roots, smooth_cej)
+        root_color = ESTIMATED_ROOT_COLOR if tooth.root_kind == "estimated" else ROOT_COLOR
+        pos, nrm, col, idx, origin = _split_by_part(tooth.mesh, tooth.face_part, hide_roots, smooth_cej, root_color)
         self.face_of_row, ends, t, n_crown = origin
         self.base_colors = col  # (n_vertices, 4) float32
         self.material = pyrender.MetallicRoughnessMaterial(
@@ -138,6 +143,17 @@ class _ToothDrawable:
         self.radius_local = float(np.linalg.norm(pos - self.center_local, axis=1).max())
         self.tinted = False
         self.painted = False  # vertex colours currently differ from base_colors
+
+
+def _gingiva_node(pyrender, name: str, gum: trimesh.Trimesh):
+    """The scanned gum of one arch (arch frame, mm), translucent pink, lit from both sides; never posed."""
+    material = pyrender.MetallicRoughnessMaterial(baseColorFactor=[*GINGIVA_COLOR, GINGIVA_ALPHA], metallicFactor=0.0,
+                                                  roughnessFactor=1.0, alphaMode="BLEND", doubleSided=True)
+    colours = np.ones((len(gum.vertices), 4), np.float32)
+    primitive = pyrender.Primitive(positions=np.asarray(gum.vertices, np.float32),
+                                   normals=np.asarray(gum.vertex_normals, np.float32), color_0=colours,
+                                   indices=np.asarray(gum.faces, np.uint32), material=material)
+    return pyrender.Node(name=f"gingiva {name}", mesh=pyrender.Mesh([primitive], name=f"gingiva {name}"))
 
 
 def _unit_sphere(subdivisions: int):
@@ -178,6 +194,9 @@ class DentitionScene:
             d = _ToothDrawable(pyrender, fdi, dentition.teeth[fdi], hide_roots, self.color_contact_faces, smooth_cej)
             self.teeth[fdi] = d
             self.scene.add_node(d.node)
+        if not hide_roots:  # the gum would hide the cervical crown that a crowns-only picture shows
+            for name, gum in dentition.gingiva.items():
+                self.scene.add_node(_gingiva_node(pyrender, name, gum))
 
         self.marker_style = marker_style
         self.marker_material = pyrender.MetallicRoughnessMaterial(
@@ -414,4 +433,4 @@ def _look_along(direction) -> np.ndarray:
     return T
 
 
-__all__ = ["DentitionScene", "VIEW_NAMES", "CROWN_COLOR", "ROOT_COLOR", "MOVING_TINT", "CONTACT_COLOR", "BACKGROUND"]
+__all__ = ["DentitionScene", "VIEW_NAMES", "CROWN_COLOR", "ROOT_COLOR", "ESTIMATED_ROOT_COLOR", "GINGIVA_COLOR", "MOVING_TINT", "CONTACT_COLOR", "BACKGROUND"]

@@ -31,7 +31,7 @@ POINTS = ("bracket", "crown_center", "center_of_resistance")
 MOMENT_AXES = ("mesiodistal", "labiolingual", "long_axis")
 MOVEMENTS = ("auto", "translation", "tipping", "rotation", "extrusion", "intrusion")
 WIRES = ("rectangular", "round")
-MODEL_KINDS = ("parametric", "meshes", "open-full-jaw")
+MODEL_KINDS = ("parametric", "meshes", "open-full-jaw", "labelled-scan")
 # What each wire can do (the paper's wire models): a round wire only rotates the tooth, about the
 # point at 1/3 of root length; a rectangular wire translates under a force and rotates under a torque.
 WIRE_MOVEMENTS = {
@@ -52,6 +52,8 @@ class ModelSpec:
     folders: tuple[Path, ...] = ()  # open-full-jaw: the scan's folders (maxilla, mandible), one transform
     frame: str = "arch"  # meshes: "arch" (already in the arch frame) or "scan" (fit one rigid transform)
     max_triangles_per_tooth: int | None = None  # meshes / open-full-jaw: simplify above it (None: meshload's default)
+    upper: Path | None = None  # labelled-scan: the upper arch scan (its label JSON beside it)
+    lower: Path | None = None  # labelled-scan: the lower arch scan
 
     def present_teeth(self) -> set[int]:
         """FDI numbers the model will have, known without loading any mesh."""
@@ -60,6 +62,10 @@ class ModelSpec:
             return {10 * q + p for q in F.QUADRANTS for p in positions}
         if self.kind == "meshes":
             return set(self.files.values())
+        if self.kind == "labelled-scan":
+            from orthosim.exchange.labelledscan import labelled_teeth
+
+            return labelled_teeth(self.upper, self.lower)
         present = set()
         for path in (p for f in (self.folders or (self.folder,)) for p in f.glob("tooth_*.stl")):
             try:
@@ -172,6 +178,12 @@ class Case:
         if m.kind == "meshes":
             return ({"kind": m.kind, "files": m.files, "scale": m.scale, "frame": m.frame, "diastema_mm": m.diastema_mm,
                      **budget}, [m.folder / f for f in m.files])
+        if m.kind == "labelled-scan":
+            from orthosim.exchange.labelledscan import labels_path_for
+
+            scans = [p for p in (m.upper, m.lower) if p is not None]
+            return ({"kind": m.kind, "arches": [p.stem for p in scans], "diastema_mm": m.diastema_mm, **budget},
+                    scans + [labels_path_for(p) for p in scans])
         folders = list(m.folders) or [m.folder]
         return ({"kind": m.kind, "folders": len(folders), "diastema_mm": m.diastema_mm, **budget},
                 sorted(p for f in folders for p in f.iterdir() if p.is_file()))
@@ -185,6 +197,10 @@ class Case:
         budget = DEFAULT_MAX_TRIANGLES if m.max_triangles_per_tooth is None else m.max_triangles_per_tooth
         if m.kind == "meshes":
             dent = load_mesh_folder(m.folder, m.files, scale=m.scale, frame=m.frame, max_triangles=budget)
+        elif m.kind == "labelled-scan":
+            from orthosim.exchange.labelledscan import load_labelled_scans
+
+            dent = load_labelled_scans(m.upper, m.lower, max_triangles=budget)
         else:
             dent = load_open_full_jaw(list(m.folders) or m.folder, max_triangles=budget)
         if m.diastema_mm:
@@ -206,7 +222,7 @@ class Case:
 _TOP = ("case", "model", "treatment", "wire", "loads", "simulation", "start", "target", "biomechanics", "occlusion")
 _CASE = ("name", "description")
 _MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files", "scale", "frame",
-          "max_triangles_per_tooth")
+          "max_triangles_per_tooth", "upper", "lower")
 MIN_TRIANGLES_PER_TOOTH = 10_000  # fewer would flatten a molar's cusps and fossae (the smooth parametric molar has 7,000)
 MAX_TRIANGLES_PER_TOOTH = 2_000_000  # 32 teeth of that hold about 3 GB of mesh arrays
 MAX_RESOLUTION = 256  # ring points: four times the finest preset
@@ -362,7 +378,7 @@ def _read_simulation(r: FieldReader) -> Simulation:
 def _read_model(path: Path, r: FieldReader) -> ModelSpec:
     kind = r.string("kind", "parametric", MODEL_KINDS)
     if kind == "parametric":
-        for key in ("folder", "files", "scale", "frame", "max_triangles_per_tooth"):
+        for key in ("folder", "files", "scale", "frame", "max_triangles_per_tooth", "upper", "lower"):
             if key in r.table:
                 r.fail(key, "applies only to mesh models", "remove it, or set kind = \"meshes\"")
         resolution = r.get("resolution", "smooth")
@@ -381,6 +397,11 @@ def _read_model(path: Path, r: FieldReader) -> ModelSpec:
         if key in r.table:
             r.fail(key, "applies only to the parametric model", "remove it, or set kind = \"parametric\"")
     diastema = _bounded(r, "diastema_mm", 0.0)
+    if kind == "labelled-scan":
+        return _read_labelled_scan_model(path, r, diastema)
+    for key in ("upper", "lower"):
+        if key in r.table:
+            r.fail(key, "applies only to kind = \"labelled-scan\"", "remove it, or set kind = \"labelled-scan\"")
     folder_raw = r.get("folder")
     many = isinstance(folder_raw, list) and kind == "open-full-jaw"
     if many and (not folder_raw or not all(isinstance(f, str) for f in folder_raw)):
@@ -423,14 +444,45 @@ def _read_model(path: Path, r: FieldReader) -> ModelSpec:
             if not any(f.glob("tooth_*.stl")):
                 r.fail(f"folder[{i}]" if many else "folder", f"no tooth_N.stl files in {f}",
                        "point it at an Open-Full-Jaw maxilla or mandible folder, or the patient folder holding both")
+    budget = _triangle_budget(r)
+    return ModelSpec(kind, diastema_mm=diastema, folder=folder, files=files, scale=_bounded(r, "scale", 1.0),
+                     folders=tuple(folders) if kind == "open-full-jaw" else (), frame=frame,
+                     max_triangles_per_tooth=budget)
+
+
+def _read_labelled_scan_model(path: Path, r: FieldReader, diastema: float) -> ModelSpec:
+    """[model] kind = "labelled-scan": `upper` and/or `lower` scan files (label JSON beside each)."""
+    from orthosim.exchange.labelledscan import labels_path_for
+
+    for key in ("folder", "files", "scale", "frame"):
+        if key in r.table:
+            r.fail(key, "not used by labelled scans", "remove it; name the scans with upper = and lower =")
+    if "upper" not in r.table and "lower" not in r.table:
+        r.fail("upper", "no scan given", 'name at least one arch scan, e.g. upper = "P1_upper.obj"')
+    scans = {}
+    for key in ("upper", "lower"):
+        if key not in r.table:
+            continue
+        scan = Path(r.string(key)).expanduser()
+        scan = scan if scan.is_absolute() else (path.parent / scan).resolve()
+        if not scan.is_file():
+            r.fail(key, f"no such scan file {scan}", "give the scan's OBJ, STL or PLY, relative to the case file or absolute")
+        if not labels_path_for(scan).is_file():
+            r.fail(key, f"no label file {labels_path_for(scan).name} beside the scan",
+                   "put the segmentation's JSON beside the mesh, with the same name")
+        scans[key] = scan
+    budget = _triangle_budget(r)
+    return ModelSpec("labelled-scan", diastema_mm=diastema, max_triangles_per_tooth=budget,
+                     upper=scans.get("upper"), lower=scans.get("lower"))
+
+
+def _triangle_budget(r: FieldReader) -> int | None:
     budget = r.get("max_triangles_per_tooth")
     if budget is not None and (isinstance(budget, bool) or not isinstance(budget, int)
                                or not MIN_TRIANGLES_PER_TOOTH <= budget <= MAX_TRIANGLES_PER_TOOTH):
         r.fail("max_triangles_per_tooth", f"must be a whole number of at least {MIN_TRIANGLES_PER_TOOTH:,} and at most "
                f"{MAX_TRIANGLES_PER_TOOTH:,}, got {budget!r}", "write e.g. 100000 (the default), or leave it out")
-    return ModelSpec(kind, diastema_mm=diastema, folder=folder, files=files, scale=_bounded(r, "scale", 1.0),
-                     folders=tuple(folders) if kind == "open-full-jaw" else (), frame=frame,
-                     max_triangles_per_tooth=budget)
+    return budget
 
 
 def _shared_data_fallback(raw: str, folder: Path) -> Path:

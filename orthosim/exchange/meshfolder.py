@@ -8,6 +8,8 @@ from a mapping or from the last number in its name. In a scan's frame, ONE rigid
 from __future__ import annotations
 
 import re
+import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,8 +20,13 @@ from orthosim.exchange.meshload import (CEJ_RULE, DEFAULT_MAX_TRIANGLES, MESH_SU
                                         estimate_scan_axes, load_tooth_mesh, tooth_from_mesh)
 from orthosim.exchange.scanframe import ORIGIN_RULE, place_scan
 from orthosim.model import fdi as fdi_mod
+from orthosim.model.anatomy import dimensions
 from orthosim.model.dentition import Dentition
 from orthosim.model.fdi import Arch
+
+
+# A closed mesh counts as a crown only while no extent exceeds this times its type's largest crown dimension.
+CROWN_SIZE_FACTOR = 1.4
 
 
 def load_mesh_folder(
@@ -45,6 +52,9 @@ def load_mesh_folder(
     one get axes from `estimate_axes` (PCA long axis toward the occlusal plane, labial away from
     the centroid of their arch). `scale` multiplies every mesh (e.g. 1000 for metres). A mesh of
     more than `max_triangles` triangles is simplified to that budget (`load_tooth_mesh`).
+    A crown without a root (open at the gum line; in the arch frame also a closed crown) is given
+    an estimated root (`orthosim.model.rootsynthesis`, announced by a `RootEstimatedWarning`) and
+    marked `root_origin == "estimated"`.
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -63,17 +73,20 @@ def load_mesh_folder(
                             "map each tooth number to one file")
         files[number] = folder / name
 
-    meshes = {n: load_tooth_mesh(p, scale=scale, max_triangles=max_triangles) for n, p in files.items()}
+    meshes = {n: load_tooth_mesh(p, scale=scale, max_triangles=max_triangles, crowns=True) for n, p in files.items()}
+    if frame not in ("arch", "scan"):
+        raise MeshError(folder, "frame", f"unknown frame {frame!r}", 'use "arch" or "scan"')
+    crown_axes = _root_crowns(meshes, files, frame)
     if frame == "scan":
-        teeth, T = place_scan(folder, meshes, estimate_scan_axes(meshes), {n: str(p) for n, p in files.items()})
+        scan_axes = {**estimate_scan_axes(meshes), **crown_axes}
+        teeth, T = place_scan(folder, meshes, scan_axes, {n: str(p) for n, p in files.items()})
+        teeth = _mark_estimated(teeth, crown_axes)
         info = {"source": str(folder), "files": {n: str(p) for n, p in files.items()}, "scale": scale,
                 "frame": "one scan frame, mapped into the arch frame by one rigid transform", "scan_to_arch": T,
                 "origin_rule": ORIGIN_RULE, "axes_estimated": sorted(teeth), "cej_rule": CEJ_RULE}
         return report_rest_interpenetration(Dentition(teeth, description or f"scanned meshes from {folder}", info), folder)
-    if frame != "arch":
-        raise MeshError(folder, "frame", f"unknown frame {frame!r}", 'use "arch" or "scan"')
-    axes = dict(axes or {})
-    given = set(axes)
+    given = set(axes or {})
+    axes = {**crown_axes, **(axes or {})}
     for arch in (Arch.UPPER, Arch.LOWER):
         members = [n for n in meshes if fdi_mod.arch_of(n) is arch]
         # The arch centroid is a good inside point once the arch has a few teeth; with fewer the
@@ -85,7 +98,8 @@ def load_mesh_folder(
         for n in members:
             if n not in axes:
                 axes[n] = estimate_axes(n, meshes[n], arch_center, str(files[n]))
-    teeth = {n: tooth_from_mesh(n, meshes[n], axes[n], source=str(files[n])) for n in meshes}
+    teeth = _mark_estimated({n: tooth_from_mesh(n, meshes[n], axes[n], source=str(files[n])) for n in meshes},
+                            crown_axes)
     info = {
         "source": str(folder),
         "files": {n: str(p) for n, p in files.items()},
@@ -95,6 +109,62 @@ def load_mesh_folder(
         "cej_rule": CEJ_RULE,
     }
     return Dentition(teeth, description or f"meshes from {folder}", info)
+
+
+def _root_crowns(meshes: dict, files: dict[int, Path], frame: str) -> dict[int, ToothAxes]:
+    """Give every crown-only mesh an estimated root, in place in `meshes`; returns their axes (FDI -> axes).
+
+    Crown-only: open (a crown cut at the gum line), or, in the arch frame, closed but reaching less
+    than a quarter of a root below the crown (opened at its cervical end first). Each is announced
+    by a `RootEstimatedWarning` naming the file.
+    """
+    from orthosim.exchange.labelledscan import labial_directions
+    from orthosim.model.rootsynthesis import (RootEstimatedWarning, margin_frame, open_closed_crown,
+                                              synthesize_root)
+
+    frames = {}
+    for n, mesh in meshes.items():
+        occlusal = np.array([0.0, -1.0 if fdi_mod.arch_of(n) is Arch.UPPER else 1.0, 0.0])
+        if not mesh.metadata.get("open"):
+            if frame != "arch" or not _rootless(n, mesh, occlusal):
+                continue
+            mesh = open_closed_crown(mesh, occlusal)
+        frames[n] = (mesh, margin_frame(mesh, str(files[n]), occlusal if frame == "arch" else None))
+    labial = labial_directions({n: f for n, (_, f) in frames.items()}) if frame == "scan" else \
+        {n: _labial_in_arch(n, f.centre, meshes) for n, (_, f) in frames.items()}
+    axes = {}
+    for n, (crown, margin) in frames.items():
+        rooted = synthesize_root(crown, n, str(files[n]), labial=labial[n], frame=margin)
+        meshes[n] = rooted.mesh
+        axes[n] = ToothAxes(long_axis=rooted.long_axis, labial=labial[n], point=rooted.margin_centre)
+        roots = f"{rooted.roots} root{'s' if rooted.roots > 1 else ''}"
+        warnings.warn(f"{files[n]}: a crown without a root; an estimated root of {rooted.root_length_mm:.1f} mm "
+                      f"({roots}) was built for it (not the patient's root)", RootEstimatedWarning, stacklevel=3)
+    return axes
+
+
+def _labial_in_arch(n: int, centre: np.ndarray, meshes: dict) -> np.ndarray:
+    """Labial direction of a crown in the arch frame: horizontal, from its arch's centre (as `estimate_axes`)."""
+    members = [m for m in meshes if fdi_mod.arch_of(m) is fdi_mod.arch_of(n)]
+    arch_centre = (np.mean([meshes[m].vertices.mean(axis=0) for m in members], axis=0) if len(members) >= 3
+                   else np.zeros(3))
+    labial = centre - arch_centre
+    labial[1] = 0.0
+    return labial
+
+
+def _rootless(n: int, mesh, occlusal: np.ndarray) -> bool:
+    """Whether a closed mesh in the arch frame is a crown only: it reaches less than a quarter root below the
+    CEJ, and no way across is it longer than a crown (a whole tooth lying on its side is no crown)."""
+    dims = dimensions(n)
+    along = mesh.vertices @ occlusal
+    short = float(along.max() - along.min()) < dims.crown_height + 0.25 * dims.root_length
+    largest = max(dims.md_width, dims.bl_width, dims.crown_height)
+    return short and float(mesh.extents.max()) < CROWN_SIZE_FACTOR * largest
+
+
+def _mark_estimated(teeth: dict, crowns) -> dict:
+    return {n: replace(t, root_origin="estimated") if n in crowns else t for n, t in teeth.items()}
 
 
 def _mapping_from_names(folder: Path) -> dict[str, int]:

@@ -83,7 +83,7 @@ class ToothAxes:
 
 
 def load_tooth_mesh(path: str | Path, scale: float = 1.0,
-                    max_triangles: int | None = DEFAULT_MAX_TRIANGLES) -> trimesh.Trimesh:
+                    max_triangles: int | None = DEFAULT_MAX_TRIANGLES, crowns: bool = False) -> trimesh.Trimesh:
     """Read one tooth mesh (STL, OBJ or PLY), multiply by `scale`, validate it, repair it if safe.
 
     Returns a closed mesh with consistent outward winding (positive volume), in mm. Repairs are
@@ -92,7 +92,9 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0,
     `max_triangles` triangles (None: no limit) is simplified to at most that many by edge
     collapse (`simplify_to_budget`), announced by a `MeshSimplifiedWarning` before the work starts;
     the result's `metadata` keeps the file's count (`triangles_in_file`) and, when simplified, how
-    far the surface may have moved (`simplify_tolerance_mm`).
+    far the surface may have moved (`simplify_tolerance_mm`). `crowns`: a mesh left open after the
+    safe hole filling is returned open (`metadata["open"]`: a crown from an intraoral scan, whose
+    root `orthosim.model.rootsynthesis` builds) instead of refused.
     """
     path = Path(path)
     where = str(path)
@@ -162,13 +164,16 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0,
         raise MeshError(where, None, f"simplifying its {in_file:,} triangles to {max_triangles:,} opened holes in it",
                         f"simplify it in a mesh editor (e.g. MeshLab 'Quadric Edge Collapse Decimation', preserve "
                         f"topology) to under {max_triangles:,} triangles, or raise [model] max_triangles_per_tooth")
+    is_open = False
     if not mesh.is_watertight:
         before = len(mesh.faces)
         trimesh.repair.fill_holes(mesh)  # fills only triangle and quad holes: safe, shape kept
-        if not mesh.is_watertight:
+        if len(mesh.faces) > before:
+            repaired.append(f"filled small holes with {len(mesh.faces) - before} faces")
+        if not mesh.is_watertight and not crowns:
             raise MeshError(where, None, "is not watertight (it has holes or edges shared by more than two faces)",
                             "close the mesh in a mesh editor (e.g. MeshLab 'Close Holes') and export it again")
-        repaired.append(f"filled small holes with {len(mesh.faces) - before} faces")
+        is_open = not mesh.is_watertight
 
     if not mesh.is_winding_consistent:
         trimesh.repair.fix_winding(mesh)
@@ -180,7 +185,7 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0,
         # CBCT segmentations can leave specks (or an inner pulp shell) beside the tooth: dropping
         # them is safe when they are tiny; a second big piece means two teeth or a split tooth.
         pieces = mesh.split(only_watertight=False)
-        volumes = np.array([abs(p.volume) for p in pieces])
+        volumes = np.array([p.area if is_open else abs(p.volume) for p in pieces])  # an open crown: by area
         biggest = int(volumes.argmax())
         rest = float(volumes.sum() - volumes[biggest])
         if rest > MAX_DROPPED_VOLUME * volumes[biggest]:
@@ -190,11 +195,12 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0,
         mesh = pieces[biggest]
         repaired.append(f"dropped {len(pieces) - 1} small separate pieces "
                         f"({100 * rest / volumes[biggest]:.2f}% of the tooth's volume)")
-    if mesh.volume < 0:
+    if not is_open and mesh.volume < 0:
         mesh.invert()
         repaired.append("inverted inside-out winding (normals now point outward)")
-    if not mesh.volume > 0:
+    if not is_open and not mesh.volume > 0:
         raise MeshError(where, None, "encloses no volume", "re-export the tooth as a closed solid")
+    mesh.metadata["open"] = is_open
 
     if repaired:
         warnings.warn(f"{where}: repaired mesh: {'; '.join(repaired)}", MeshRepairWarning, stacklevel=2)

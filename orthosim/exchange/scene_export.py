@@ -8,7 +8,8 @@ that step (so a viewer shows the arch and keeps each tooth its own object). glTF
 metre by convention; coordinates are written as they are, in millimetres (arch frame: y up, +z
 anterior), as dental CAD tools expect; scale by 0.001 on import for metric scenes.
 ply: PLY holds one mesh, so each step is a folder `step_NNNNN/` of `tooth_<FDI>.ply`, each posed
-in the arch frame (mm). Extracted teeth are left out.
+in the arch frame (mm). Extracted teeth are left out. A scanned gum (`Dentition.gingiva`, labelled
+intraoral scans) is written too, as `gingiva_<upper|lower>`, where it was scanned (it never moves).
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ def export_scenes(dentition, records: Iterable, extracted: set[int], out_dir: st
             for n in teeth:
                 scene.add_geometry(dentition.teeth[n].mesh, node_name=f"tooth_{n}", geom_name=f"tooth_{n}",
                                    transform=record.poses[n])
+            for name, gum in dentition.gingiva.items():
+                scene.add_geometry(gum, node_name=f"gingiva_{name}", geom_name=f"gingiva_{name}")
             path = out_dir / f"step_{record.step:05d}.glb"
             write_bytes(path, scene.export(file_type="glb"))
             written.append(path)
@@ -40,6 +43,10 @@ def export_scenes(dentition, records: Iterable, extracted: set[int], out_dir: st
             for n in teeth:
                 path = out_dir / f"step_{record.step:05d}" / f"tooth_{n}.ply"
                 write_bytes(path, dentition.teeth[n].world_mesh(record.poses[n]).export(file_type="ply"))
+                written.append(path)
+            for name, gum in dentition.gingiva.items():
+                path = out_dir / f"step_{record.step:05d}" / f"gingiva_{name}.ply"
+                write_bytes(path, gum.export(file_type="ply"))
                 written.append(path)
         else:
             raise ValueError(f"unknown scene format {fmt!r}")

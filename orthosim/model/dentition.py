@@ -19,6 +19,8 @@ class Dentition:
     teeth: dict[int, Tooth]  # FDI -> tooth model
     description: str = ""
     info: dict = field(default_factory=dict)  # how it was built (arch form, offsets, source files)
+    # scanned gum per arch ("upper", "lower"): trimesh in the arch frame, mm; drawn and exported, never collided
+    gingiva: dict = field(default_factory=dict)
 
     def __post_init__(self):
         for number, tooth in self.teeth.items():
@@ -86,4 +88,5 @@ def open_midline_space(dent: Dentition, space_mm: float) -> Dentition:
         teeth[n] = replace(t, rest_pose=pose)
     info = {**dent.info, "diastema_mm": space_mm,
             "diastema_rule": "each side moved rigidly along x by half the space, away from the midline"}
-    return Dentition(teeth, f"{dent.description}, {space_mm:g} mm midline space opened", info)
+    # the scanned gum cannot split at the midline with the teeth: it stays where it was scanned
+    return Dentition(teeth, f"{dent.description}, {space_mm:g} mm midline space opened", info, dent.gingiva)

@@ -39,7 +39,8 @@ ENTRY_KIND = "dentition"
 _BUILDER_MODULES = ("model/anatomy", "model/archform", "model/dentition", "model/fdi", "collision/interpenetration",
                     "exchange/meshload", "exchange/meshfolder", "geometry/meshrefine", "analysis/occlusion", "exchange/openfulljaw",
                     "model/parametric", "exchange/scanfolders", "exchange/scanframe", "model/tooth", "model/toothshape",
-                    "geometry/meshquery", "geometry/penetration")
+                    "geometry/meshquery", "geometry/penetration",
+                    "model/rootsynthesis", "exchange/labelledscan", "geometry/meshcut")
 _PACKAGE = Path(__file__).resolve().parents[1]  # orthosim/
 
 
@@ -98,9 +99,12 @@ def save_dentition(dent, path: str | Path, raised: list[tuple[str, str]] = ()) -
         arrays[f"{n}_rest_pose"] = np.asarray(t.rest_pose, np.float64)
         for name, p in t.landmarks.items():
             arrays[f"{n}_landmark_{name}"] = np.asarray(p, np.float64)
-        teeth.append({"fdi": n, "source": t.source, "landmarks": list(t.landmarks)})
+        teeth.append({"fdi": n, "source": t.source, "landmarks": list(t.landmarks), "root": t.root_origin})
+    for name, gum in dent.gingiva.items():
+        arrays[f"gingiva_{name}_vertices"] = np.asarray(gum.vertices, np.float64)
+        arrays[f"gingiva_{name}_faces"] = np.asarray(gum.faces, np.int64)
     header = {"description": dent.description, "info": _jsonable(dent.info), "teeth": teeth,
-              "warnings": [list(w) for w in raised]}
+              "warnings": [list(w) for w in raised], "gingiva": list(dent.gingiva)}
     arrays["header"] = np.array(json.dumps(header))
     write_arrays(path, ENTRY_KIND, Path(path).stem, arrays)
 
@@ -147,11 +151,33 @@ def load_dentition(path: str | Path):
             mesh = trimesh.Trimesh(a["vertices"], a["faces"], process=False)
             teeth[n] = Tooth(fdi=n, mesh=mesh, face_part=a["face_part"], crown_center=a["crown_center"], apex=a["apex"],
                              rest_pose=a["rest_pose"], source=entry["source"],
-                             landmarks={name: a[f"landmark_{name}"] for name in entry["landmarks"]})
+                             landmarks={name: a[f"landmark_{name}"] for name in entry["landmarks"]},
+                             root_origin=_root_origin(path, entry.get("root", "scan")))
+        gingiva = {name: _gingiva_mesh(path, z, name) for name in header.get("gingiva", [])}
         raised = [tuple(w) for w in header["warnings"]]
-        return Dentition(teeth, header["description"], header["info"]), raised
+        return Dentition(teeth, header["description"], header["info"], gingiva), raised
     except (KeyError, TypeError, ValueError) as err:  # a header this version did not write
         raise damaged(path, f"its header does not describe a dentition ({type(err).__name__}: {err})") from None
+
+
+def _root_origin(path: Path, value) -> str:
+    if value not in ("scan", "estimated"):
+        raise damaged(path, f"a tooth's root is {value!r}, neither 'scan' nor 'estimated'")
+    return value
+
+
+def _gingiva_mesh(path: Path, z: Mapping[str, np.ndarray], name: str):
+    """A scanned gum's mesh from an entry, checked like the teeth's arrays."""
+    import trimesh
+
+    v, f = z.get(f"gingiva_{name}_vertices"), z.get(f"gingiva_{name}_faces")
+    if v is None or f is None or v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
+        raise damaged(path, f"gingiva {name}: vertices or faces missing or of the wrong shape")
+    if not np.isfinite(v).all():
+        raise damaged(path, f"gingiva {name}: vertices hold non-finite numbers")
+    if f.dtype.kind not in "iu" or (f.size and (f.min() < 0 or f.max() >= len(v))):
+        raise damaged(path, f"gingiva {name}: a face names a vertex that does not exist")
+    return trimesh.Trimesh(v, f, process=False)
 
 
 def _warning_class(qualified: str) -> type[Warning]:
@@ -204,4 +230,4 @@ def cached_dentition(parameters: Mapping, build: Callable[[], object], input_fil
     except OSError:
         pass  # a read-only or full cache folder costs a rebuild next time, never a failure
     _replay(raised)
-    return Dentition(built.teeth, built.description, _jsonable(built.info))
+    return Dentition(built.teeth, built.description, _jsonable(built.info), built.gingiva)

@@ -37,6 +37,7 @@ class Tooth:
     rest_pose: np.ndarray  # (4, 4) local -> arch frame, the tooth's initial placement
     landmarks: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (3,) mm, local
     source: str = "parametric"
+    root_origin: str = "scan"  # "scan": the root is in the input mesh; "estimated": built for a crown (model.rootsynthesis)
 
     @property
     def arch(self) -> Arch:
@@ -64,6 +65,11 @@ class Tooth:
     def long_axis(self) -> np.ndarray:
         """(3,) unit vector, local: from the apex toward the crown."""
         return np.array([0.0, 1.0, 0.0])
+
+    @property
+    def root_kind(self) -> str:
+        """What the root is: "scan" (from the input mesh), "estimated" (built for a crown-only tooth) or "parametric"."""
+        return "parametric" if self.source == "parametric" else self.root_origin
 
     @property
     def root_length(self) -> float:

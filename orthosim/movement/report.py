@@ -176,6 +176,7 @@ class RunReport:
                 "rotated_deg": float(np.degrees(rotation_angle(first.poses[n], last.poses[n]))),
                 "final_pose": last.poses[n],
                 "extracted": n in m.extracted,
+                "root": t.root_kind,
             }
         for n, info in self._load_movements().items():
             teeth[str(n)].update(info)

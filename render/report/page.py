@@ -54,7 +54,8 @@ def case_record(data: CaseData, images: dict) -> dict:
             "initial_penetration_mm": m["initial_penetration_mm"],
             "collisions": m["collisions"],
             "distances": m["distances"],
-            "teeth": {n: {k: t[k] for k in ("moved_mm", "rotated_deg", "extracted")} for n, t in m["teeth"].items()},
+            "teeth": {n: {**{k: t[k] for k in ("moved_mm", "rotated_deg", "extracted")}, "root": t.get("root")}
+                      for n, t in m["teeth"].items()},
             "totals_over_days": [{"day": s["time_days"], "total_mm": s["total_distance_mm"]} for s in r.steps],
             "final_day": r.steps[-1]["time_days"],
             "bite": m.get("bite"),
@@ -74,6 +75,8 @@ def case_record(data: CaseData, images: dict) -> dict:
         "case_file": _shown_path(data.case_file),
         "case_sha256": data.case_sha256,
         "extracted": list(data.extracted),
+        # teeth whose root was built for a crown-only input (orthosim.model.rootsynthesis), not scanned
+        "estimated_roots": [n for n in data.dentition.fdis if data.dentition.teeth[n].root_kind == "estimated"],
         "duration_days": first.duration_days,
         "detectors": data.detectors,
         "poses": {p: pose_label(p) for p in data.pose_names},
