@@ -15,7 +15,6 @@ importer, `orthosim.exchange.openfulljaw`, uses it with the dataset's own axes).
 from __future__ import annotations
 
 import io
-import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +24,6 @@ import trimesh
 
 from orthosim.model import fdi as fdi_mod
 from orthosim.model.anatomy import dimensions
-from orthosim.model.dentition import Dentition
 from orthosim.errors import MeshError
 from orthosim.model.fdi import Arch
 from orthosim.model.tooth import Tooth, part_of_faces
@@ -104,33 +102,8 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0,
         raise MeshError(where, None, "file not found", "check the path and the file name")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise MeshError(where, None, f"unsupported mesh format '{path.suffix}'", "convert it to STL, OBJ or PLY")
-    try:
-        # process=False: repairs below are done step by step so each one can be reported.
-        text_safe = _ascii_safe_bytes(path)
-        if text_safe is None:
-            mesh = trimesh.load(str(path), force="mesh", process=False)
-        else:
-            mesh = trimesh.load(io.BytesIO(text_safe), file_type=path.suffix.lower()[1:], force="mesh", process=False)
-    except Exception as exc:  # trimesh raises many types for a corrupt file; all mean "unreadable"
-        raise MeshError(where, None, f"cannot be read as a mesh ({type(exc).__name__}: {exc})",
-                        "re-export it as a binary STL") from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0 or len(mesh.vertices) == 0:
-        raise MeshError(where, None, "contains no triangles", "re-export the tooth as a closed triangle mesh")
-
     repaired: list[str] = []
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    faces = np.asarray(mesh.faces, dtype=np.int64)
-    if faces.ndim != 2 or faces.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(vertices):
-        raise MeshError(where, "faces", "refer to vertices that do not exist", "re-export the mesh")
-    bad_vertex = ~np.isfinite(vertices).all(axis=1)
-    if bad_vertex.any():
-        keep = ~bad_vertex[faces].any(axis=1)
-        repaired.append(f"dropped {int((~keep).sum())} faces on {int(bad_vertex.sum())} NaN/infinite vertices")
-        faces = faces[keep]
-        if len(faces) == 0:
-            raise MeshError(where, "vertices", "every face uses a NaN or infinite vertex", "re-export the mesh")
-    mesh = trimesh.Trimesh(vertices * scale, faces, process=False)
-    mesh.remove_unreferenced_vertices()
+    mesh = _finite_mesh(_read_mesh_file(path, where), scale, where, repaired)
 
     _check_units(mesh, where, scale)
     in_file = len(mesh.faces)
@@ -141,17 +114,7 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0,
                       "set [model] max_triangles_per_tooth in the case file to change the budget",
                       MeshSimplifiedWarning, stacklevel=2)
 
-    # An STL is a triangle soup: merging coincident vertices is how it is read, not a repair.
-    mesh.merge_vertices()
-    keep = mesh.nondegenerate_faces()
-    if not keep.all():
-        repaired.append(f"dropped {int((~keep).sum())} zero-area faces")
-        mesh.update_faces(keep)
-    keep = mesh.unique_faces()
-    if not keep.all():
-        repaired.append(f"dropped {int((~keep).sum())} duplicate faces")
-        mesh.update_faces(keep)
-    mesh.remove_unreferenced_vertices()
+    _drop_degenerate_faces(mesh, repaired)
     full = None
     if max_triangles is not None and len(mesh.faces) > max_triangles:
         full, mesh = mesh, simplify_to_budget(mesh, max_triangles, where)
@@ -164,37 +127,10 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0,
         raise MeshError(where, None, f"simplifying its {in_file:,} triangles to {max_triangles:,} opened holes in it",
                         f"simplify it in a mesh editor (e.g. MeshLab 'Quadric Edge Collapse Decimation', preserve "
                         f"topology) to under {max_triangles:,} triangles, or raise [model] max_triangles_per_tooth")
-    is_open = False
-    if not mesh.is_watertight:
-        before = len(mesh.faces)
-        trimesh.repair.fill_holes(mesh)  # fills only triangle and quad holes: safe, shape kept
-        if len(mesh.faces) > before:
-            repaired.append(f"filled small holes with {len(mesh.faces) - before} faces")
-        if not mesh.is_watertight and not crowns:
-            raise MeshError(where, None, "is not watertight (it has holes or edges shared by more than two faces)",
-                            "close the mesh in a mesh editor (e.g. MeshLab 'Close Holes') and export it again")
-        is_open = not mesh.is_watertight
-
-    if not mesh.is_winding_consistent:
-        trimesh.repair.fix_winding(mesh)
-        if not mesh.is_winding_consistent:
-            raise MeshError(where, None, "has inconsistent face winding that cannot be fixed (non-manifold)",
-                            "repair the mesh in a mesh editor and export it again")
-        repaired.append("made face winding consistent")
+    is_open = _close_holes(mesh, where, crowns, repaired)
+    _consistent_winding(mesh, where, repaired)
     if mesh.body_count > 1:
-        # CBCT segmentations can leave specks (or an inner pulp shell) beside the tooth: dropping
-        # them is safe when they are tiny; a second big piece means two teeth or a split tooth.
-        pieces = mesh.split(only_watertight=False)
-        volumes = np.array([p.area if is_open else abs(p.volume) for p in pieces])  # an open crown: by area
-        biggest = int(volumes.argmax())
-        rest = float(volumes.sum() - volumes[biggest])
-        if rest > MAX_DROPPED_VOLUME * volumes[biggest]:
-            raise MeshError(where, None, f"holds {len(pieces)} separate closed pieces, the others "
-                            f"{100 * rest / volumes[biggest]:.0f}% of the largest's volume",
-                            "export one tooth per file as a single closed surface")
-        mesh = pieces[biggest]
-        repaired.append(f"dropped {len(pieces) - 1} small separate pieces "
-                        f"({100 * rest / volumes[biggest]:.2f}% of the tooth's volume)")
+        mesh = _largest_piece(mesh, where, is_open, repaired)
     if not is_open and mesh.volume < 0:
         mesh.invert()
         repaired.append("inverted inside-out winding (normals now point outward)")
@@ -208,6 +144,94 @@ def load_tooth_mesh(path: str | Path, scale: float = 1.0,
     if full is not None:
         mesh.metadata["simplify_tolerance_mm"] = tolerance
     return mesh
+
+
+def _read_mesh_file(path: Path, where: str) -> trimesh.Trimesh:
+    """The file's triangles as they are (no processing: repairs are done step by step, each reported)."""
+    try:
+        text_safe = _ascii_safe_bytes(path)
+        if text_safe is None:
+            mesh = trimesh.load(str(path), force="mesh", process=False)
+        else:
+            mesh = trimesh.load(io.BytesIO(text_safe), file_type=path.suffix.lower()[1:], force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for a corrupt file; all mean "unreadable"
+        raise MeshError(where, None, f"cannot be read as a mesh ({type(exc).__name__}: {exc})",
+                        "re-export it as a binary STL") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0 or len(mesh.vertices) == 0:
+        raise MeshError(where, None, "contains no triangles", "re-export the tooth as a closed triangle mesh")
+    return mesh
+
+
+def _finite_mesh(mesh: trimesh.Trimesh, scale: float, where: str, repaired: list[str]) -> trimesh.Trimesh:
+    """The mesh scaled to mm, without faces on NaN or infinite vertices; MeshError on bad indices."""
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    if faces.ndim != 2 or faces.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(vertices):
+        raise MeshError(where, "faces", "refer to vertices that do not exist", "re-export the mesh")
+    bad_vertex = ~np.isfinite(vertices).all(axis=1)
+    if bad_vertex.any():
+        keep = ~bad_vertex[faces].any(axis=1)
+        repaired.append(f"dropped {int((~keep).sum())} faces on {int(bad_vertex.sum())} NaN/infinite vertices")
+        faces = faces[keep]
+        if len(faces) == 0:
+            raise MeshError(where, "vertices", "every face uses a NaN or infinite vertex", "re-export the mesh")
+    mesh = trimesh.Trimesh(vertices * scale, faces, process=False)
+    mesh.remove_unreferenced_vertices()
+    return mesh
+
+
+def _drop_degenerate_faces(mesh: trimesh.Trimesh, repaired: list[str]) -> None:
+    """Coincident vertices merged (an STL is a triangle soup: that is how it is read, not a repair),
+    then zero-area and duplicate faces dropped, in place."""
+    mesh.merge_vertices()
+    keep = mesh.nondegenerate_faces()
+    if not keep.all():
+        repaired.append(f"dropped {int((~keep).sum())} zero-area faces")
+        mesh.update_faces(keep)
+    keep = mesh.unique_faces()
+    if not keep.all():
+        repaired.append(f"dropped {int((~keep).sum())} duplicate faces")
+        mesh.update_faces(keep)
+    mesh.remove_unreferenced_vertices()
+
+
+def _close_holes(mesh: trimesh.Trimesh, where: str, crowns: bool, repaired: list[str]) -> bool:
+    """Small holes filled in place; whether the mesh stays open (allowed for crowns only)."""
+    if mesh.is_watertight:
+        return False
+    before = len(mesh.faces)
+    trimesh.repair.fill_holes(mesh)  # fills only triangle and quad holes: safe, shape kept
+    if len(mesh.faces) > before:
+        repaired.append(f"filled small holes with {len(mesh.faces) - before} faces")
+    if not mesh.is_watertight and not crowns:
+        raise MeshError(where, None, "is not watertight (it has holes or edges shared by more than two faces)",
+                        "close the mesh in a mesh editor (e.g. MeshLab 'Close Holes') and export it again")
+    return not mesh.is_watertight
+
+
+def _consistent_winding(mesh: trimesh.Trimesh, where: str, repaired: list[str]) -> None:
+    if not mesh.is_winding_consistent:
+        trimesh.repair.fix_winding(mesh)
+        if not mesh.is_winding_consistent:
+            raise MeshError(where, None, "has inconsistent face winding that cannot be fixed (non-manifold)",
+                            "repair the mesh in a mesh editor and export it again")
+        repaired.append("made face winding consistent")
+
+
+def _largest_piece(mesh: trimesh.Trimesh, where: str, is_open: bool, repaired: list[str]) -> trimesh.Trimesh:
+    """CBCT segmentations can leave specks (or an inner pulp shell) beside the tooth: dropping them
+    is safe when they are tiny; a second big piece means two teeth or a split tooth (MeshError)."""
+    pieces = mesh.split(only_watertight=False)
+    volumes = np.array([p.area if is_open else abs(p.volume) for p in pieces])  # an open crown: by area
+    biggest = int(volumes.argmax())
+    rest = float(volumes.sum() - volumes[biggest])
+    if rest > MAX_DROPPED_VOLUME * volumes[biggest]:
+        raise MeshError(where, None, f"holds {len(pieces)} separate closed pieces, the others "
+                        f"{100 * rest / volumes[biggest]:.0f}% of the largest's volume",
+                        "export one tooth per file as a single closed surface")
+    repaired.append(f"dropped {len(pieces) - 1} small separate pieces "
+                    f"({100 * rest / volumes[biggest]:.2f}% of the tooth's volume)")
+    return pieces[biggest]
 
 
 def simplify_to_budget(mesh: trimesh.Trimesh, max_triangles: int, where: str) -> trimesh.Trimesh:
