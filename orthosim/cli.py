@@ -62,6 +62,7 @@ class _LazyGroup(click.Group):
         "spheretree": ("orthosim.spheretree.commands", "spheretree", "Build, export and evaluate sphere trees."),
         "collide": ("orthosim.collision.commands", "collide", "Collision accuracy studies, timings and single queries."),
         "batch": ("orthosim.batch.commands", "batch", "Many runs and parameter sweeps, on every core or a Dask cluster."),
+        "cases": ("orthosim.exchange.shippedcases", "cases", "List the shipped case files, or copy one to start from."),
     }
 
     # commands that measurement (orthosim_bench, outside the product) adds to a lazy group

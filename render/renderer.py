@@ -95,7 +95,7 @@ def _lean_renderer_class(pyrender, GL):
                 GL.glUniformMatrix4fv(self._loc(program, "M"), 1, GL.GL_FALSE, M)
                 GL.glUniform4fv(self._loc(program, "marker_color"), 1, np.asarray(material.baseColorFactor, np.float32))
                 GL.glUniform3fv(self._loc(program, "marker_emissive"), 1, np.asarray(material.emissiveFactor, np.float32))
-                GL.glBindVertexArray(primitive._vaid)
+                GL.glBindVertexArray(primitive._vertex_array_id)
                 GL.glDrawArraysInstanced(GL.GL_POINTS, 0, len(primitive.positions), 1)
             GL.glDisable(GL.GL_PROGRAM_POINT_SIZE)
 
@@ -198,7 +198,7 @@ def _lean_renderer_class(pyrender, GL):
                         (GL.glEnable if want_cull else GL.glDisable)(GL.GL_CULL_FACE)
                         GL.glCullFace(GL.GL_BACK)
                         cull = want_cull
-                    GL.glBindVertexArray(primitive._vaid)
+                    GL.glBindVertexArray(primitive._vertex_array_id)
                     n_instances = 1 if primitive.poses is None else len(primitive.poses)
                     GL.glDrawElementsInstanced(primitive.mode, primitive.indices.size, GL.GL_UNSIGNED_INT,
                                                None, n_instances)
