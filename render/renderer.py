@@ -1,4 +1,4 @@
-"""The renderer: owns the offscreen OSMesa OpenGL context and turns a `DentitionScene` into pixels.
+"""The renderer: owns the offscreen OpenGL context (EGL or OSMesa, `orthosim_render.glbackend`) and turns a `DentitionScene` into pixels.
 
 Drawing goes through a subclass of pyrender's `Renderer` (pyrender still owns meshes, buffers and
 the shader cache); each change below is measured by `orthosim bench` (bench/render.py,
@@ -25,7 +25,7 @@ import weakref
 
 import numpy as np
 
-from orthosim_render.gl import load_pyrender, osmesa_platform, shader_dir
+from orthosim_render.gl import load_pyrender, offscreen_platform, shader_dir
 
 
 def _lean_renderer_class(pyrender, GL):
@@ -287,7 +287,8 @@ class Renderer:
         self.msaa = msaa
         w, h = self.size
         self._platform = None
-        self._platform = osmesa_platform(w, h)
+        self._platform = offscreen_platform(w, h)
+        self.backend = self._platform.orthosim_backend  # glbackend.GLBackend: what draws
         if lean and shading != "lambert":
             raise ValueError("the lean forward pass drives orthosim's Lambert shaders only")
         self._inner = (_lean_renderer_class(pyrender, GL)(w, h, lighting=lighting) if lean
@@ -305,7 +306,8 @@ class Renderer:
         self._seen_versions = weakref.WeakKeyDictionary()
         self._instance_capacity = weakref.WeakKeyDictionary()
         self._flags = pyrender.RenderFlags.NONE
-        if msaa:
+        # EGL has no window framebuffer to read back: pyrender's stock pass draws into its own there
+        if msaa or (not lean and self.backend.name != "osmesa"):
             self._flags |= pyrender.RenderFlags.OFFSCREEN | pyrender.RenderFlags.RGBA
             # pyrender would read and linearise depth too: read colour only
             self._inner._read_main_framebuffer = self._read_msaa_colour
@@ -338,7 +340,7 @@ class Renderer:
         if self.lean:
             self._mark_static(scene)
         out = self._inner.render(scene.scene, self._flags)
-        if self.msaa:
+        if self._flags & self._pyrender.RenderFlags.OFFSCREEN:
             rgba = out
         elif self.lean:
             return out  # already top row first, with the channels asked for (see _forward_pass)
