@@ -89,7 +89,8 @@ def cases(copy: tuple[str, str] | None) -> None:
     width = max((len(c.name) for c in rows), default=0)
     for c in rows:
         data = " [needs the Open-Full-Jaw data]" if c.needs_data else ""
-        click.echo(f"{c.name:<{width}}  {c.title} ({c.duration_days:g} days){data}")
+        span = f" ({c.duration_days:g} days)" if c.duration_days else ""  # staging cases: a set-up, no treatment time
+        click.echo(f"{c.name:<{width}}  {c.title}{span}{data}")
     from orthosim.exchange.case import CASES_DIR
 
     click.echo(f"{len(rows)} cases in {CASES_DIR}; copy one with: orthosim cases --copy NAME DIR")
