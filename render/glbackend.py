@@ -27,6 +27,8 @@ from orthosim.errors import OrthosimError
 
 ENV = "ORTHOSIM_GL"
 CHOICES = ("auto", "egl", "osmesa")
+# finer requests (ORTHOSIM_GL only; the bench measures each device kind in its own process)
+DEVICE_CHOICES = ("egl/gpu", "egl/software", "egl/default")
 
 # EGL enums (Khronos EGL 1.5 and the EXT/MESA device extensions)
 _EGL_EXTENSIONS = 0x3055
@@ -182,7 +184,7 @@ def requested() -> str:
     """The backend asked for: ORTHOSIM_GL, else a PYOPENGL_PLATFORM of egl/osmesa, else "auto"."""
     request = os.environ.get(ENV, "").strip().lower()
     if request:
-        if request not in CHOICES:
+        if request not in CHOICES + DEVICE_CHOICES:
             raise RenderSetupError(ENV, request, "is not an OpenGL backend", f"use one of {', '.join(CHOICES)}")
         return request
     platform = os.environ.get("PYOPENGL_PLATFORM", "").strip().lower()
@@ -198,11 +200,15 @@ _FIXES = {
 
 
 def choose(request: str) -> GLBackend:
-    """The backend `request` ("auto", "egl", "osmesa") gets here, or RenderSetupError naming the fix."""
-    if request not in CHOICES:
+    """The backend `request` ("auto", "egl", "osmesa", or an EGL device kind such as "egl/software")
+    gets here, or RenderSetupError naming the fix."""
+    if request not in CHOICES + DEVICE_CHOICES:
         raise RenderSetupError("--gl", request, "is not an OpenGL backend", f"use one of {', '.join(CHOICES)}")
-    candidates = (probe_egl() if request in ("auto", "egl") else []) + (
+    candidates = (probe_egl() if request != "osmesa" else []) + (
         probe_osmesa() if request in ("auto", "osmesa") else [])
+    if request in DEVICE_CHOICES:
+        candidates = [b for b in candidates if b.label == request]
+        request = "egl"
     if not candidates:
         what = {"auto": "neither EGL nor OSMesa", "egl": "no EGL device", "osmesa": "OSMesa"}[request]
         raise RenderSetupError(f"--gl {request}", None, f"cannot start offscreen OpenGL: {what} can create a "
@@ -232,7 +238,7 @@ def select(request: str | None = None) -> GLBackend:
     global _chosen
     request = requested() if request is None else request
     if _chosen is not None:
-        if request not in ("auto", _chosen.name):
+        if request not in ("auto", _chosen.name, _chosen.label):
             raise RenderSetupError("--gl", request, f"this process already draws through {_chosen.label}",
                                    "choose the backend once, before anything is drawn (a new process for another)")
         return _chosen
