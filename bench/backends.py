@@ -88,7 +88,7 @@ def render_backends(case: str | Path, size: tuple[int, int] = (640, 480), frames
     """{"fps": {label: {...}}, "ratios": {...}, ...}: every backend found, each in its own process (see above).
 
     `frames` measured frames per backend, in `rounds` turns, after `warmup` frames each. Probes the
-    system libraries only (`glbackend.available_backends`): call it before this process holds a GL
+    system libraries only (`glbackend.available_backends`): call it while this process holds no GL
     context, since the EGL probe initialises and terminates each device's display.
     """
     from orthosim_render.glbackend import available_backends

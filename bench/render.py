@@ -279,7 +279,7 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
               png: bool = True, frames_per_step: int = 6, step_days: float | None = 2.0,
               tree_build: bool = True, startup: bool = True, staging: bool = True, batch: bool = False,
               report: bool = False, report_runs: str | Path | None = None, memory: bool = False,
-              run_case=None, backends: bool = False) -> dict:
+              run_case=None) -> dict:
     """Measure and return the bench record (see the module docstring and the output contract).
 
     `run_case(case_path, out_dir, detector, render_opts)` is the CLI's own run (the composition root
@@ -297,9 +297,8 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
     sphere trees are also built from nothing (`orthosim_bench.spheretree`, target 10 s). With
     `batch`, animations per minute of `orthosim batch` with 1 and 2 workers (`orthosim_bench.batch`).
     With `report`, `orthosim report` of the paper's three cases x three detectors is timed from runs in
-    `report_runs` (made there first when missing; `orthosim_bench.report`, target 30 s). With
-    `backends`, render frames/s through every offscreen backend found, each in its own process
-    (`orthosim_bench.backends`, the case's model; needs a case, not a given dentition).
+    `report_runs` (made there first when missing; `orthosim_bench.report`, target 30 s).
+    `render_backends` (`orthosim_bench.backends`) is measured beside this record by the CLI.
     """
     import tempfile
 
@@ -345,12 +344,6 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         if run_case is None:
             raise ValueError("run_bench(batch=True) needs run_case, the CLI's run of one case")
         batch_record = batch_throughput(run_case, Path(case) if case is not None else DEFAULT_CASE)
-    backends_record = None
-    if backends and case_obj is not None:  # before this process holds a GL context (the EGL probe terminates displays)
-        from orthosim_bench.backends import render_backends
-
-        backends_record = render_backends(case_path, size, frames=max(30, frames // 2), warmup=min(warmup, 20),
-                                          n_markers=n_markers)
     synthetic = SyntheticMotion(dentition, n_markers=n_markers)
     n_states = warmup + frames
     states = [synthetic(i) for i in range(n_states)]  # render alone: the same states for every variant
@@ -551,7 +544,6 @@ def run_bench(case: str | Path | None = None, *, dentition=None, simulate: bool 
         "batch": batch_record if batch else None,
         "pending": pending,
         "render_variants": variants,
-        "render_backends": backends_record,
         "memory_mb": {"start": mem_start, "before_long_run": mem_before_long,
                       f"after_{settle}_frames": mem_settled, "end": mem_end,
                       "growth_after_settling": mem_end - mem_settled,

@@ -262,7 +262,13 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
                        step_days=step_days, tree_build=not no_tree_build, startup=not no_startup,
                        staging=not no_staging, batch=not no_batch, report=not no_report, report_runs=report_runs,
-                       memory=not no_memory, run_case=run_case, backends=not no_backends)
+                       memory=not no_memory, run_case=run_case)
+    if not no_backends:  # after run_bench closed its renderer: each backend draws in a process of its own
+        from orthosim.exchange.case import DEFAULT_CASE
+        from orthosim_bench.backends import render_backends
+
+        record["render_backends"] = render_backends(case or DEFAULT_CASE, size, frames=max(30, frames // 2),
+                                                    warmup=min(warmup, 20), n_markers=markers)
     write_json(out_file, record)
     rb = record.get("render_backends")
     if rb:

@@ -41,11 +41,32 @@ def _egl_platform(backend, width: int, height: int):
         if backend.device_index >= len(devices):
             raise RuntimeError(f"EGL lists {len(devices)} devices now, not device {backend.device_index}")
         device = devices[backend.device_index]
-    platform = egl.EGLPlatform(width, height, device=device)
+    platform = _shared_display_platform(egl)(width, height, device=device)
     platform.init_context()
     if not platform._egl_context:
         raise RuntimeError("eglCreateContext returned no context")
     return platform
+
+
+def _shared_display_platform(egl):
+    """pyrender's EGLPlatform, except that closing it destroys its context only, never the display.
+
+    EGL has one display per device and process, shared by every context on it: pyrender's
+    `delete_context` terminates it, which kills every other renderer of the process (the bench's
+    renderers, a test's cached one) at their next `eglMakeCurrent`. The display stays initialised
+    until the process ends; a later context re-initialises it (a no-op) and uses it.
+    """
+    class SharedDisplayEGLPlatform(egl.EGLPlatform):
+        def delete_context(self):
+            from OpenGL.EGL import EGL_NO_CONTEXT, EGL_NO_SURFACE, eglDestroyContext, eglMakeCurrent
+
+            if self._egl_display is not None and self._egl_context is not None:
+                eglMakeCurrent(self._egl_display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT)
+                eglDestroyContext(self._egl_display, self._egl_context)
+            self._egl_context = None
+            self._egl_display = None
+
+    return SharedDisplayEGLPlatform
 
 
 def _osmesa_platform(width: int, height: int):

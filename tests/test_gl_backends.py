@@ -215,3 +215,32 @@ def test_a_pytest_session_that_never_asks_for_the_fixture_is_left_as_it_was(tmp_
                           text=True, env=env, timeout=300)
     assert done.returncode == 0, done.stdout + done.stderr
     assert "1 passed" in done.stdout
+
+
+_TWO_RENDERERS = textwrap.dedent("""
+    import numpy as np
+    from orthosim.exchange.case import load_case
+    from orthosim_render.frame_state import FrameState
+    from orthosim_render.renderer import Renderer
+    from orthosim_render.scene import DentitionScene
+    dent = load_case("cases/normal_occlusion.toml").build_dentition()
+    state = FrameState(poses=dent.rest_poses(), extracted=frozenset())
+    kept = Renderer((160, 120)); scene = DentitionScene(dent, (160, 120)); scene.update(state)
+    before = kept.render(scene, "frontal")
+    for _ in range(2):
+        other = Renderer((160, 120)); s = DentitionScene(dent, (160, 120)); s.update(state)
+        other.render(s, "frontal"); other.close()
+    print(kept.backend.label, np.array_equal(before, kept.render(scene, "frontal")))
+""")
+
+
+def test_closing_one_renderer_leaves_the_others_of_the_process_drawing(tmp_path):
+    """EGL has one display per device and process: closing a renderer must not terminate it under the others."""
+    labels = _backends_here(tmp_path)
+    if not labels:
+        pytest.skip("no offscreen OpenGL on this machine")
+    for gl in dict.fromkeys(label.split("/")[0] for label in labels):
+        done = _python(tmp_path, _TWO_RENDERERS, gl=gl)
+        assert done.returncode == 0, done.stderr
+        label, same = done.stdout.split()
+        assert label.split("/")[0] == gl and same == "True"
