@@ -84,10 +84,11 @@ class _Child:
 
 
 def render_backends(case: str | Path, size: tuple[int, int] = (640, 480), frames: int = 150, warmup: int = 20,
-                    n_markers: int = 2000, rounds: int = 10) -> dict:
+                    n_markers: int = 2000, rounds: int | None = None) -> dict:
     """{"fps": {label: {...}}, "ratios": {...}, ...}: every backend found, each in its own process (see above).
 
-    `frames` measured frames per backend, in `rounds` turns, after `warmup` frames each. Probes the
+    `frames` measured frames per backend, in `rounds` turns (default: 5 frames a turn: a shared
+    machine's load swings within seconds), after `warmup` frames each. Probes the
     system libraries only (`glbackend.available_backends`): call it while this process holds no GL
     context, since the EGL probe initialises and terminates each device's display.
     """
@@ -102,6 +103,7 @@ def render_backends(case: str | Path, size: tuple[int, int] = (640, 480), frames
         cpu: dict[str, float] = {c.backend: 0.0 for c in children}
         for child in children:
             child.draw(warmup)
+        rounds = rounds or max(1, frames // 5)
         per_turn = max(1, frames // rounds)
         for _ in range(rounds):
             for child in children:
