@@ -34,8 +34,7 @@ fi
 if [ ! -x .venv/bin/uv ]; then
     .venv/bin/python -m pip install -q --disable-pip-version-check 'uv>=0.4'
 fi
-extra=$([ "$action" = demo ] && echo "" || echo "[test]")
-stamp=.venv/.orthosim-installed$extra
+if [ "$action" = demo ]; then extra=""; stamp=.venv/.orthosim-installed-demo; else extra="[test]"; stamp=.venv/.orthosim-installed; fi
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     # pyrender's fork installs the same `pyrender` folder: the old pyrender must go first, not after
     if .venv/bin/uv pip show -q --python .venv/bin/python pyrender >/dev/null 2>&1; then
