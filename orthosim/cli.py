@@ -243,7 +243,8 @@ def check(cases: tuple[Path, ...]) -> None:
               help="Where the report's runs are made once and kept for later benches.")
 @click.option("--step-days", default=2.0, show_default=True, type=click.FloatRange(min=0.01),
               help="Simulation step for the bench, so the case's teeth keep moving through the measured frames.")
-@click.option("--no-backends", is_flag=True, help="Skip render frames/s through every other offscreen backend found.")
+@click.option("--no-backends", is_flag=True,
+              help="Skip render_backends: render frames/s through each offscreen backend found, one process each.")
 @gl_option
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
           no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool,
