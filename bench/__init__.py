@@ -4,5 +4,6 @@ Installed as `orthosim_bench`. Nothing in `orthosim/` (but the CLI, the composit
 `render/` imports it; each module takes what it measures as arguments.
 `render` (stage and end-to-end throughput, the bench record), `collision` (detector timings),
 `spheretree` (tree build), `batch` (animations per minute), `staging` (staging time), `report`
-(report time), `memory` (peak memory of long runs), `startup` (launch to first step).
+(report time), `memory` (peak memory of long runs), `startup` (launch to first step), `backends`
+(render frames/s through each offscreen OpenGL backend found).
 """

@@ -268,7 +268,7 @@ def memory_timings(case: str | Path, *, steps: int = 10_000, frames: int = 2_000
     with tempfile.TemporaryDirectory(prefix="orthosim-memory-", dir=work_dir) as tmp:
         tmp = Path(tmp)
         long_case = _case_with_steps(Path(case), steps, tmp)
-        env = {**os.environ, "PYOPENGL_PLATFORM": os.environ.get("PYOPENGL_PLATFORM", "osmesa")}
+        env = dict(os.environ)  # ORTHOSIM_GL / PYOPENGL_PLATFORM: the backend this bench chose
         no_render = measure_peak_memory(_orthosim_argv("run", long_case, "--out", tmp / "no_render", "--no-render",
                                                        "--quiet"), env=env)
         case_steps = load_case(case).steps

@@ -23,6 +23,9 @@ machine does not move the figure; the end-to-end records also give frames / tota
   - end_to_end_against_stages: end to end as a share of the slower stage (target 0.85), with
     rendering read as draw + read-back and as drawing + writing frames, and of the frame rate the
     cores allow at the run's own CPU per frame;
+  - render_backends: the render-alone figure through every offscreen OpenGL backend found (EGL GPU,
+    EGL on Mesa's software device, OSMesa), each in its own process, and each one's ratio to OSMesa
+    in the same run (`orthosim_bench.backends`);
   - render_variants: the same render with each optimisation undone in turn, measured
     round-robin in the same run so that the ratios stand even when the absolute figures wander
     with the machine's load;
@@ -359,6 +362,7 @@ def run_bench(case: str | Path | None = None, *, run_case=None, **options) -> di
     `report_runs` (made there first when missing; `orthosim_bench.report`, target 30 s). With
     `labels`, the label pass of semantic goldens against a golden's render (`orthosim_bench.labels`,
     target at most a fifth).
+    `render_backends` (`orthosim_bench.backends`) is measured beside this record by the CLI.
     """
     from orthosim_render.renderer import Renderer
     from orthosim_render.scene import DentitionScene
@@ -372,7 +376,8 @@ def run_bench(case: str | Path | None = None, *, run_case=None, **options) -> di
     mem_start = rss_mb()
     renderer = Renderer(plan.size)
     scene = DentitionScene(model.dentition, plan.size)
-    gl = {"gl_renderer": renderer.gl_renderer, "gl_version": renderer.gl_version}
+    gl = {"gl_renderer": renderer.gl_renderer, "gl_version": renderer.gl_version,
+          "gl_backend": renderer.backend.label}  # orthosim_render.glbackend: what drew every figure but render_backends
     render_times = _render_alone(renderer, scene, states, plan.warmup)
     encode = ["MP4 encode (libx264 ultrafast)"] + (["PNG frames (orthosim_render.png)"] if plan.png else [])
     e2e_synthetic = _end_to_end(plan, model.dentition, (synthetic(i) for i in range(plan.n_states)))

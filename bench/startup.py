@@ -26,7 +26,7 @@ def _timed_run(case: Path, out_dir: Path, size: str) -> tuple[float, float]:
     """(seconds to the first-step line, seconds to the end) of one `orthosim run`, from its launch."""
     cmd = [sys.executable, "-c", "from orthosim.cli import entry; entry()", "run", str(case), "--out", str(out_dir),
            "--verbose", "--size", size, "--frames-per-step", "1"]
-    env = {**os.environ, "PYOPENGL_PLATFORM": os.environ.get("PYOPENGL_PLATFORM", "osmesa")}
+    env = dict(os.environ)  # ORTHOSIM_GL / PYOPENGL_PLATFORM: the backend this bench chose
     started = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
     first = None

@@ -20,6 +20,7 @@ from orthosim.errors import OrthosimError
 from orthosim.runtime.run import MIN_ANIMATION_S, RunOptions
 
 DEMO_VIEWS = ("right_buccal", "maxillary_occlusal")
+GL_CHOICES = ("auto", "egl", "osmesa")  # orthosim_render.glbackend.CHOICES (not imported here: --help stays light)
 
 
 def _size(ctx, param, value: str) -> tuple[int, int]:
@@ -63,6 +64,7 @@ class _LazyGroup(click.Group):
         "collide": ("orthosim.collision.commands", "collide", "Collision accuracy studies, timings and single queries."),
         "batch": ("orthosim.batch.commands", "batch", "Many runs and parameter sweeps, on every core or a Dask cluster."),
         "evidence": ("orthosim_render.evidence_page", "evidence_command", "Run the clinical evidence table; write a page."),
+        "cases": ("orthosim.exchange.shippedcases", "cases", "List the shipped case files, or copy one to start from."),
     }
 
     # commands that measurement (orthosim_bench, outside the product) adds to a lazy group
@@ -102,8 +104,28 @@ def main() -> None:
     """Headless orthodontic treatment simulator: tooth movement, collision detection, offscreen rendering."""
 
 
+def gl_option(f):
+    """`--gl auto|egl|osmesa`: the offscreen OpenGL backend of a command that draws (see select_gl)."""
+    return click.option("--gl", type=click.Choice(GL_CHOICES), default=None,
+                        help="Offscreen OpenGL: auto (an EGL GPU, else EGL on Mesa's software device, else OSMesa), "
+                             "egl or osmesa. Default: $ORTHOSIM_GL, else auto.")(f)
+
+
+def select_gl(gl: str | None) -> str:
+    """Choose this process's offscreen OpenGL backend now, before any work (a one-line error, exit 2,
+    when it cannot start); `gl` None keeps ORTHOSIM_GL or auto. Children inherit the choice."""
+    import os
+
+    from orthosim_render.glbackend import ENV, select
+
+    if gl:
+        os.environ[ENV] = gl
+    return select().label
+
+
 def render_options(f):
     """Options shared by the commands that draw frames."""
+    f = gl_option(f)
     f = click.option("--no-render", is_flag=True, help="Run the simulation alone; write no images.")(f)
     f = click.option("--size", default="640x480", show_default=True, callback=_size, help="Image size WIDTHxHEIGHT.")(f)
     f = click.option("--view", "views", multiple=True, callback=_views,
@@ -167,8 +189,11 @@ def demo(out_dir: Path, **render_opts) -> None:
               help="Output folder (default: out/<case name>-occlusion).")
 @click.option("--size", default="800x600", show_default=True, callback=_size, help="Image size WIDTHxHEIGHT.")
 @click.option("--no-render", is_flag=True, help="Write occlusion.json only.")
-def occlusion(case: Path, out_dir: Path | None, size, no_render: bool) -> None:
+@gl_option
+def occlusion(case: Path, out_dir: Path | None, size, no_render: bool, gl: str | None) -> None:
     """Occlusal measures and contacts per pair of a case's model at rest; contact areas drawn (Figure 7)."""
+    if not no_render:
+        select_gl(gl)
     from orthosim.storage.atomic import write_json
     from orthosim.exchange.case import load_case
     from orthosim.analysis.occlusalcontacts import occlusal_contacts, occlusion_record
@@ -223,14 +248,18 @@ def check(cases: tuple[Path, ...]) -> None:
 @click.option("--labels", is_flag=True, help="Also time the label pass of semantic goldens against a golden's render.")
 @click.option("--closure", "closure_case", type=click.Path(path_type=Path), default=None,
               help="Also time this (real-jaw) case's step with and without the bite's closure.")
+@click.option("--no-backends", is_flag=True,
+              help="Skip render_backends: render frames/s through each offscreen backend found, one process each.")
+@gl_option
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
           no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool,
           no_staging: bool, no_batch: bool, no_report: bool, report_runs: Path, no_memory: bool, labels: bool,
-          closure_case: Path | None, no_scan: bool) -> None:
+          closure_case: Path | None, no_scan: bool, no_backends: bool, gl: str | None) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
     """
+    select_gl(gl)
     from orthosim_bench.render import run_bench
 
     from orthosim.storage.atomic import write_json
@@ -245,7 +274,17 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
 
         record["closure"] = closure_timings(closure_case)
         click.echo(f"closure: {record['closure']['closure_over_rest_of_step']:.2f} of the rest of the step (target <= 1)")
+    if not no_backends:  # after run_bench closed its renderer: each backend draws in a process of its own
+        from orthosim.exchange.case import DEFAULT_CASE
+        from orthosim_bench.backends import render_backends
+
+        record["render_backends"] = render_backends(case or DEFAULT_CASE, size, frames=max(30, frames // 2),
+                                                    warmup=min(warmup, 20), n_markers=markers)
     write_json(out_file, record)
+    rb = record.get("render_backends")
+    if rb:
+        click.echo("render fps per backend: " + ", ".join(f"{k} {v['fps']:.1f}" for k, v in rb["fps"].items())
+                   + "".join(f"; {k} {v:.2f}" for k, v in rb.get("ratios", {}).items()))
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
     click.echo(f"fps (median, target {record['target_fps']}): {shown} -> {out_file}")
@@ -316,8 +355,9 @@ def stage() -> None:
 @click.option("--gif", is_flag=True, help="Also write animation.gif.")
 @click.option("--export", "export", type=click.Choice(["stl", "ply", "glb"]), default=None,
               help="Also write every stage's arches for the lab: models/stage_NN_upper.FMT and _lower (mm, case frame).")
+@gl_option
 def stage_plan(case: Path, out_dir: Path, limits: str | None, no_render: bool, size, views, frames_per_stage: int,
-               gif: bool, export: str | None) -> None:
+               gif: bool, export: str | None, gl: str | None) -> None:
     """Split a case's set-up ([target]) into aligner stages: within per-stage limits, free of contact.
 
     Writes stages.json, staging.csv, ipr.csv, movement.csv, certificate.json, charts/, index.html
@@ -329,6 +369,7 @@ def stage_plan(case: Path, out_dir: Path, limits: str | None, no_render: bool, s
 
     parsed = StageLimits.parse(limits)
     if not no_render:
+        select_gl(gl)
         from orthosim_render.cameras import check_view
 
         views = [check_view(v) for v in views or ("frontal", "mandibular_occlusal")]
@@ -435,9 +476,11 @@ def imgdiff(golden: Path, candidate: Path, diff_path: Path | None, max_level: in
 @click.option("--render", "render_runs", is_flag=True,
               help="Draw the runs' frames too (frontal view, DIR/runs/...), so the report can show their frames/s.")
 @click.option("--size", default="480x360", show_default=True, callback=_size, help="Size of each picture WIDTHxHEIGHT.")
+@gl_option
 def report(inputs: tuple[Path, ...], out_dir: Path, detectors: tuple[str, ...], from_runs: bool, pdf: bool,
-           render_runs: bool, size) -> None:
+           render_runs: bool, size, gl: str | None) -> None:
     """Contact-area report: index.html, report.json (and report.pdf) for cases or finished runs."""
+    select_gl(gl)  # the report draws its pictures
     from orthosim_render.report.page import build_report
 
     if from_runs:
@@ -453,7 +496,7 @@ def report(inputs: tuple[Path, ...], out_dir: Path, detectors: tuple[str, ...], 
         for path in inputs:
             for det in detectors or PAPER_DETECTORS:
                 run_dir = out_dir / "runs" / path.stem / det
-                opts = {"no_render": not render_runs, "size": size, "views": ("frontal",), "frames_per_step": 1}
+                opts = {"no_render": not render_runs, "size": size, "views": ("frontal",), "frames_per_step": 1, "gl": gl}
                 run_case(path, run_dir, det, opts)
                 run_dirs.append(run_dir)
     if pdf:
@@ -480,9 +523,11 @@ def run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: 
 
 
 def check_render_options(render_opts: dict) -> None:
-    """Refuse an unknown --view before any work (the camera presets live in render/)."""
+    """Refuse an unknown --view, or an offscreen backend that cannot start, before any work."""
     if not render_opts.get("no_render"):
         from orthosim_render.cameras import check_view
+
+        select_gl(render_opts.get("gl"))
 
         for view in render_opts.get("views") or ():
             check_view(view)
@@ -500,7 +545,7 @@ def run_options(detector: str | None, opts: dict) -> RunOptions:
                       frames_per_step=get("frames_per_step"), seconds=get("seconds"), fps=get("fps", d.fps),
                       split_views=get("split_views", d.split_views), export_scene=get("export_scene"),
                       export_steps=get("export_steps"), simulate_in_process=get("simulate_in_process", False),
-                      single_core=get("single_core", False),
+                      single_core=get("single_core", False), gl=get("gl"),
                       verbosity=0 if get("quiet") else 2 if get("verbose") else 1)
 
 
@@ -515,6 +560,8 @@ def _run_case(case_path: Path, out_dir: Path, options: RunOptions) -> dict:
 
     from orthosim.runtime.outputfolder import output_folder
 
+    if options.render:
+        select_gl(options.gl)  # before any work: a backend that cannot start is one line, not a half-written run
     # out_dir is checked and locked now, before any work; the run is written into a private
     # staging folder that replaces it whole at the end, so a failed or stopped run leaves it as it was
     lines: list[str] = []

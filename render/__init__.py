@@ -1,10 +1,5 @@
-"""Everything that draws or writes images, video and reports for orthosim.
+"""Everything that draws or writes images, video and reports for orthosim (installed as `orthosim_render`).
 
-Importing any module of this package selects OSMesa as PyOpenGL's platform (unless the user set
-PYOPENGL_PLATFORM), because PyOpenGL fixes its platform at its own first import: doing it here
-means no import order of ours or of a test can end up with a GLX platform on a headless machine.
+Importing this package changes nothing in the process: the OpenGL backend (EGL or OSMesa) is chosen
+when something first draws, in `orthosim_render.glbackend`, and only then is PYOPENGL_PLATFORM set.
 """
-
-import os as _os
-
-_os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")

@@ -421,7 +421,7 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
             written = sink.close()
             elapsed = time.perf_counter() - started
             encode_s = time.perf_counter() - t_close
-            gl_renderer = renderer.gl_renderer
+            gl_renderer, gl_backend = renderer.gl_renderer, renderer.backend.label
     except BaseException:
         sink.abort()
         raise
@@ -434,6 +434,7 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
         "views": list(views),
         "size": list(size),
         "gl_renderer": gl_renderer,
+        "gl_backend": gl_backend,  # orthosim_render.glbackend: egl/gpu, egl/software, egl/default or osmesa
         "video_fps": fps,
         "encode_s": encode_s,
         "overlay": None if caption is None else {"labels": caption.labels},

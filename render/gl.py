@@ -2,8 +2,9 @@
 
 Every module of `render/` that needs pyrender gets it through `load_pyrender()`, so the order of
 the steps below is guaranteed whichever module is imported first:
-  1. `PYOPENGL_PLATFORM=osmesa` (unless the user chose another platform) before OpenGL loads, so
-     tests and the CLI render without a display and without the user setting anything;
+  1. the offscreen backend (EGL or OSMesa, `orthosim_render.glbackend`) chosen, and PYOPENGL_PLATFORM
+     set to it, before OpenGL loads, so tests and the CLI render without a display and without the
+     user setting anything;
   2. PyOpenGL's per-call `glGetError` check switched off (`OPENGL_ERROR_CHECKING=1` in the
      environment turns it back on for debugging): it doubles the cost of every GL call and the
      renderer makes a few hundred per frame;
@@ -23,34 +24,75 @@ import os
 import sys
 import types
 
-from orthosim.errors import OrthosimError
+from orthosim_render.glbackend import RenderSetupError, select
 
 _loaded = None
 
-
-class RenderSetupError(OrthosimError):
-    """Offscreen OpenGL cannot start on this machine (a missing system library, usually)."""
+__all__ = ["RenderSetupError", "load_pyrender", "offscreen_platform", "shader_dir"]
 
 
-def osmesa_platform(width: int, height: int):
-    """A current OSMesa context (pyrender's platform object) of the given size, or a one-line error."""
+def _egl_platform(backend, width: int, height: int):
+    from pyrender.platforms import egl
+
+    if backend.device_index is None:
+        device = egl.EGLDevice(None)  # EGL's default display
+    else:
+        devices = egl.query_devices()
+        if backend.device_index >= len(devices):
+            raise RuntimeError(f"EGL lists {len(devices)} devices now, not device {backend.device_index}")
+        device = devices[backend.device_index]
+    platform = _shared_display_platform(egl)(width, height, device=device)
+    platform.init_context()
+    if not platform._egl_context:
+        raise RuntimeError("eglCreateContext returned no context")
+    return platform
+
+
+def _shared_display_platform(egl):
+    """pyrender's EGLPlatform, except that closing it destroys its context only, never the display.
+
+    EGL has one display per device and process, shared by every context on it: pyrender's
+    `delete_context` terminates it, which kills every other renderer of the process (the bench's
+    renderers, a test's cached one) at their next `eglMakeCurrent`. The display stays initialised
+    until the process ends; a later context re-initialises it (a no-op) and uses it.
+    """
+    class SharedDisplayEGLPlatform(egl.EGLPlatform):
+        def delete_context(self):
+            from OpenGL.EGL import EGL_NO_CONTEXT, EGL_NO_SURFACE, eglDestroyContext, eglMakeCurrent
+
+            if self._egl_display is not None and self._egl_context is not None:
+                eglMakeCurrent(self._egl_display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT)
+                eglDestroyContext(self._egl_display, self._egl_context)
+            self._egl_context = None
+            self._egl_display = None
+
+    return SharedDisplayEGLPlatform
+
+
+def _osmesa_platform(width: int, height: int):
+    from pyrender.platforms.osmesa import OSMesaPlatform
+
+    platform = OSMesaPlatform(width, height)
+    platform.init_context()
+    if not platform._context:
+        raise RuntimeError("OSMesaCreateContextAttribs returned no context")
+    return platform
+
+
+def offscreen_platform(width: int, height: int):
+    """A current offscreen GL context (pyrender's platform object) of `width` x `height` px, through
+    the backend this process chose (`glbackend.select`), or a one-line RenderSetupError."""
     load_pyrender()
+    backend = select()
     try:
-        from pyrender.platforms.osmesa import OSMesaPlatform
-
-        platform = OSMesaPlatform(width, height)
-        platform.init_context()
-        if not platform._context:
-            raise RuntimeError("OSMesaCreateContextAttribs returned no context")
+        platform = (_egl_platform(backend, width, height) if backend.name == "egl"
+                    else _osmesa_platform(width, height))
         platform.make_current()
-    except (ImportError, OSError, AttributeError, RuntimeError, AssertionError) as exc:
-        chosen = os.environ.get("PYOPENGL_PLATFORM", "osmesa")
-        fix = ("unset PYOPENGL_PLATFORM (orthosim renders through osmesa), or run with --no-render"
-               if chosen != "osmesa" else
-               "install the libosmesa6 system package (bash tools/dev.sh install) and PyOpenGL 3.1.10, "
-               "or run with --no-render")
-        raise RenderSetupError("PYOPENGL_PLATFORM", chosen,
-                               f"cannot create an offscreen OSMesa context ({type(exc).__name__}: {exc})", fix) from exc
+    except (ImportError, OSError, AttributeError, RuntimeError, AssertionError, ValueError) as exc:
+        raise RenderSetupError("--gl", backend.label,
+                               f"cannot create an offscreen context ({type(exc).__name__}: {exc})",
+                               "choose another backend with --gl (or ORTHOSIM_GL), or run with --no-render") from exc
+    platform.orthosim_backend = backend
     return platform
 
 
@@ -101,11 +143,18 @@ def load_pyrender():
     global _loaded
     if _loaded is not None:
         return _loaded
-    os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+    backend = select()  # sets PYOPENGL_PLATFORM: PyOpenGL reads it once, at its first import
     import OpenGL
 
     if "OpenGL.GL" not in sys.modules:
         OpenGL.ERROR_CHECKING = os.environ.get("OPENGL_ERROR_CHECKING", "") == "1"
+    if backend.name == "egl":
+        import OpenGL.raw.EGL._errors as egl_errors
+
+        # PyOpenGL 3.1.10 defines the EGL error checker only when checking is on (its else branch
+        # sets another name), so OpenGL.EGL cannot import with checking off: no checker is meant
+        if not hasattr(egl_errors, "_error_checker"):
+            egl_errors._error_checker = None
     import numpy as np
 
     if not hasattr(np, "infty"):

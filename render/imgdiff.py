@@ -1,11 +1,12 @@
 """Image regression: a candidate render against a golden PNG, exactly or within a tolerance, and where they differ.
 
 Renders are bit-identical on one machine and Mesa build (DEVELOPERS.md), and not across Mesa
-builds. So a golden PNG carries a sidecar (`GOLDEN.json`: the GL renderer string and Mesa version
-it was drawn with, its size, camera view, orthosim version, case file hash and frame index), and
-the comparison picks its mode from it:
-  - exact: the candidate was drawn by the same GL renderer and Mesa version as the golden; any
-    pixel that differs is a failure;
+builds. So a golden PNG carries a sidecar (`GOLDEN.json`: the offscreen backend, GL renderer string
+and Mesa version it was drawn with, its size, camera view, orthosim version, case file hash and
+frame index), and the comparison picks its mode from it:
+  - exact: the candidate was drawn through the same backend (EGL device kind or OSMesa,
+    `orthosim_render.glbackend`), GL renderer and Mesa version as the golden; any pixel that differs
+    is a failure (a sidecar written before orthosim drew through EGL names no backend: OSMesa drew it);
   - tolerance: otherwise (or when either side's GL is unknown); a pixel differs when one of its
     channels is off by more than `max_level` levels (default 3), and the images match while at
     most `max_fraction` of the pixels (default 0.1 %) differ. SSIM (scikit-image) is reported
@@ -66,6 +67,7 @@ class GoldenSidecar:
 
     gl_renderer: str | None = None  # GL_RENDERER, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)"
     mesa_version: str | None = None  # from GL_VERSION, e.g. "22.3.6"
+    gl_backend: str | None = None  # GLBackend.label: "egl/gpu", "egl/software", "egl/default" or "osmesa"
     size: tuple[int, int] | None = None  # (width, height) px
     view: str | None = None  # camera preset (orthosim_render.cameras)
     orthosim_version: str | None = __version__
@@ -87,7 +89,7 @@ class GoldenSidecar:
         if unknown:
             raise ImageInputError(where, unknown[0], "is not a sidecar field",
                                   f"remove it; the fields are {', '.join(sorted(names))}")
-        for name in ("gl_renderer", "mesa_version", "view", "orthosim_version", "case_file", "case_sha256"):
+        for name in ("gl_renderer", "mesa_version", "gl_backend", "view", "orthosim_version", "case_file", "case_sha256"):
             if data.get(name) is not None and not isinstance(data[name], str):
                 raise ImageInputError(where, name, f"is {data[name]!r}, not a string or null",
                                       "rewrite it with orthosim imgdiff --update")
@@ -215,8 +217,15 @@ class Comparison:
         return "; ".join([text, *masked, *self.notes])
 
 
+LEGACY_BACKEND = "osmesa"  # what drew a sidecar that names a GL renderer but no backend (orthosim drew only through OSMesa then)
+
+
+def _backend(sidecar: GoldenSidecar) -> str:
+    return sidecar.gl_backend or LEGACY_BACKEND
+
+
 def choose_mode(golden: GoldenSidecar | None, candidate: GoldenSidecar | None) -> tuple[str, str]:
-    """("exact" | "tolerance", why): exact only when both GL renderer and Mesa version are known and equal."""
+    """("exact" | "tolerance", why): exact only when backend, GL renderer and Mesa version are known and equal."""
     if golden is None:
         return "tolerance", "the golden has no sidecar"
     if not golden.gl_renderer or not golden.mesa_version:
@@ -227,7 +236,9 @@ def choose_mode(golden: GoldenSidecar | None, candidate: GoldenSidecar | None) -
         return "tolerance", f"Mesa {golden.mesa_version} vs {candidate.mesa_version}"
     if candidate.gl_renderer != golden.gl_renderer:
         return "tolerance", f"GL renderer {golden.gl_renderer!r} vs {candidate.gl_renderer!r}"
-    return "exact", f"same {golden.gl_renderer}, Mesa {golden.mesa_version}"
+    if _backend(candidate) != _backend(golden):
+        return "tolerance", f"backend {_backend(golden)} vs {_backend(candidate)}"
+    return "exact", f"same {golden.gl_renderer}, Mesa {golden.mesa_version}, through {_backend(golden)}"
 
 
 def _same_channels(golden: np.ndarray, candidate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -61,9 +61,10 @@ def _renderer(size: tuple[int, int]):
 
 
 def gl_identity() -> GoldenSidecar:
-    """This machine's GL renderer string and Mesa version (from an offscreen context), the rest unset."""
+    """This process's offscreen backend, GL renderer string and Mesa version (from its context), the rest unset."""
     r = _renderer(DEFAULT_SIZE)
-    return GoldenSidecar(gl_renderer=r.gl_renderer, mesa_version=mesa_version(r.gl_version), orthosim_version=__version__)
+    return GoldenSidecar(gl_renderer=r.gl_renderer, mesa_version=mesa_version(r.gl_version), gl_backend=r.backend.label,
+                         orthosim_version=__version__)
 
 
 def this_machine_gl() -> GoldenSidecar | None:
@@ -152,7 +153,7 @@ def render_case_frame(case_file: str | Path, step: int = -1, view: str = "fronta
     """Simulation step `step` of the case (-1: its last) from camera preset `view`, at `size` (w, h) px.
 
     Contact markers are drawn (`contacts=False` leaves them out); `detector` defaults to the case's.
-    The frame's sidecar names this machine's GL renderer and Mesa version, the size, view, case
+    The frame's sidecar names this process's backend, GL renderer and Mesa version, the size, view, case
     file name and SHA-256 and the step, as `orthosim imgdiff` and the pytest fixture expect. With
     `labels` (the default) the frame also carries what each pixel shows (`orthosim_render.labels`),
     drawn in the same pass, so that a failing check can say which tooth changed and how.
@@ -173,7 +174,7 @@ def render_case_frame(case_file: str | Path, step: int = -1, view: str = "fronta
                          labels=labels)
     image, label_frame = image if labels else (image, None)
     gl = gl_identity()
-    sidecar = GoldenSidecar(gl_renderer=gl.gl_renderer, mesa_version=gl.mesa_version, size=(int(size[0]), int(size[1])),
+    sidecar = GoldenSidecar(gl_renderer=gl.gl_renderer, mesa_version=gl.mesa_version, gl_backend=gl.gl_backend, size=(int(size[0]), int(size[1])),
                             view=view, orthosim_version=__version__, case_file=run.case_file.name,
                             case_sha256=run.case_sha256, frame_index=state.step)
     return RenderedFrame(image, sidecar, label_frame)

@@ -1,4 +1,4 @@
-"""The renderer: owns the offscreen OSMesa OpenGL context and turns a `DentitionScene` into pixels.
+"""The renderer: owns the offscreen OpenGL context (EGL or OSMesa, `orthosim_render.glbackend`) and turns a `DentitionScene` into pixels.
 
 Drawing goes through a subclass of pyrender's `Renderer` (pyrender still owns meshes, buffers and
 the shader cache); each change below is measured by `orthosim bench` (bench/render.py,
@@ -25,7 +25,7 @@ import weakref
 
 import numpy as np
 
-from orthosim_render.gl import load_pyrender, osmesa_platform, shader_dir
+from orthosim_render.gl import load_pyrender, offscreen_platform, shader_dir
 
 
 def _lean_renderer_class(pyrender, GL):
@@ -100,7 +100,7 @@ def _lean_renderer_class(pyrender, GL):
                 GL.glUniformMatrix4fv(self._loc(program, "M"), 1, GL.GL_FALSE, M)
                 GL.glUniform4fv(self._loc(program, "marker_color"), 1, np.asarray(material.baseColorFactor, np.float32))
                 GL.glUniform3fv(self._loc(program, "marker_emissive"), 1, np.asarray(material.emissiveFactor, np.float32))
-                GL.glBindVertexArray(primitive._vaid)
+                GL.glBindVertexArray(primitive._vertex_array_id)
                 GL.glDrawArraysInstanced(GL.GL_POINTS, 0, len(primitive.positions), 1)
             GL.glDisable(GL.GL_PROGRAM_POINT_SIZE)
 
@@ -227,7 +227,7 @@ def _lean_renderer_class(pyrender, GL):
                 (GL.glEnable if want_cull else GL.glDisable)(GL.GL_CULL_FACE)
                 GL.glCullFace(GL.GL_BACK)
                 bound["cull"] = want_cull
-            GL.glBindVertexArray(primitive._vaid)
+            GL.glBindVertexArray(primitive._vertex_array_id)
             n_instances = 1 if primitive.poses is None else len(primitive.poses)
             GL.glDrawElementsInstanced(primitive.mode, primitive.indices.size, GL.GL_UNSIGNED_INT,
                                        None, n_instances)
@@ -347,7 +347,8 @@ class Renderer:
         self.msaa = msaa
         w, h = self.size
         self._platform = None
-        self._platform = osmesa_platform(w, h)
+        self._platform = offscreen_platform(w, h)
+        self.backend = self._platform.orthosim_backend  # glbackend.GLBackend: what draws
         if lean and shading != "lambert":
             raise ValueError("the lean forward pass drives orthosim's Lambert shaders only")
         self._inner = (_lean_renderer_class(pyrender, GL)(w, h, lighting=lighting) if lean
@@ -365,7 +366,8 @@ class Renderer:
         self._seen_versions = weakref.WeakKeyDictionary()
         self._instance_capacity = weakref.WeakKeyDictionary()
         self._flags = pyrender.RenderFlags.NONE
-        if msaa:
+        # EGL has no window framebuffer to read back: pyrender's stock pass draws into its own there
+        if msaa or (not lean and self.backend.name != "osmesa"):
             self._flags |= pyrender.RenderFlags.OFFSCREEN | pyrender.RenderFlags.RGBA
             # pyrender would read and linearise depth too: read colour only
             self._inner._read_main_framebuffer = self._read_msaa_colour
@@ -398,7 +400,7 @@ class Renderer:
         if self.lean:
             self._mark_static(scene)
         out = self._inner.render(scene.scene, self._flags)
-        if self.msaa:
+        if self._flags & self._pyrender.RenderFlags.OFFSCREEN:
             rgba = out
         elif self.lean:
             return out  # already top row first, with the channels asked for (see _forward_pass)

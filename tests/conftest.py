@@ -7,9 +7,19 @@ the parametric teeth alone.
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from orthosim.exchange.shareddata import OPEN_FULL_JAW, shared_data_dir
+from orthosim_render.glbackend import ENV, probe_osmesa
+
+# The goldens (tests/golden/) were drawn through OSMesa, and a golden is compared exactly only with
+# frames drawn through its own backend: where OSMesa is present, the suite draws through it (unless
+# ORTHOSIM_GL says otherwise), else through `auto`'s EGL, the goldens then compared within tolerance.
+# tests/test_gl_backends.py draws through each backend in child processes.
+if not os.environ.get(ENV) and not os.environ.get("PYOPENGL_PLATFORM") and probe_osmesa():
+    os.environ[ENV] = "osmesa"
 
 _REAL_DATA = shared_data_dir() / OPEN_FULL_JAW
 _outcomes: dict[str, str] = {}

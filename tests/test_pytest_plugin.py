@@ -99,7 +99,7 @@ def test_golden_workflow_new_pass_fail_with_diff_then_regenerate(tmp_path):
     assert changed.returncode == 1
     diff = re.search(r"diff image: (\S+\.diff\.png)", changed.stdout).group(1)
     assert Path(diff).is_file() and Path(diff).is_relative_to(tmp_path / "bt")  # the test's tmp_path
-    assert "differ (exact: same llvmpipe (test), Mesa 1.0)" in changed.stdout and "1600 of 4800 pixels differ" in changed.stdout
+    assert "differ (exact: same llvmpipe (test), Mesa 1.0, through osmesa)" in changed.stdout and "1600 of 4800 pixels differ" in changed.stdout
     panels = read_png(diff)
     assert panels.shape == (60, 240, 3)
 

@@ -1,21 +1,24 @@
 #!/usr/bin/env bash
 # One entry point for a fresh Debian 12 machine: installs what orthosim needs (system packages,
 # a virtual environment with pinned Python packages), then runs the demo or the test suite.
-#   bash tools/dev.sh demo    install, then `orthosim demo` (writes out/demo/)
-#   bash tools/dev.sh test    install, then the whole test suite
-#   bash tools/dev.sh install install only
+#   bash tools/dev.sh demo    install what the demo needs, then `orthosim demo` (writes out/demo/)
+#   bash tools/dev.sh test    install everything (test extra, Chromium), then the whole test suite
+#   bash tools/dev.sh install install everything, run nothing
 set -euo pipefail
 cd "$(dirname "$0")/.."
 action="${1:-demo}"; shift || true
 
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 
-# System packages, installed only when missing: OSMesa (offscreen GL; no PyPI wheel ships it),
-# Chromium and, on a stock Debian python3, the venv module.
+# System packages, installed only when missing: offscreen GL (no PyPI wheel ships it): Mesa's EGL
+# (libegl-mesa0, every current Debian) and OSMesa (libosmesa6, gone from Mesa 25.1 on, so only where
+# the distribution still has it); orthosim draws through whichever starts (--gl, docs/notes/install-and-gl.md).
+# Chromium is only for the tests and `orthosim report --pdf`; on a stock Debian python3, the venv module.
 need=()
-dpkg -s libosmesa6 >/dev/null 2>&1 || need+=(libosmesa6)
+dpkg -s libegl-mesa0 >/dev/null 2>&1 || need+=(libegl-mesa0 libegl1)
+if ! dpkg -s libosmesa6 >/dev/null 2>&1 && apt-cache show libosmesa6 >/dev/null 2>&1; then need+=(libosmesa6); fi
 # headless Chromium prints `orthosim report --pdf` and is the browser the report tests load the page in
-command -v chromium >/dev/null 2>&1 || need+=(chromium)
+if [ "$action" != demo ]; then command -v chromium >/dev/null 2>&1 || need+=(chromium); fi
 python3 -c 'import ensurepip, venv' >/dev/null 2>&1 || need+=(python3-venv)
 if [ "${#need[@]}" -gt 0 ]; then
     echo "dev.sh: installing system packages: ${need[*]}"
@@ -23,26 +26,29 @@ if [ "${#need[@]}" -gt 0 ]; then
     DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq "${need[@]}" >/dev/null
 fi
 
-# Python environment: uv installs from pyproject.toml, with tools/overrides.txt replacing
-# pyrender's PyOpenGL pin (3.1.0 cannot create an OSMesa context with attributes).
+# Python environment: uv (only for speed; plain `pip install .` resolves the same pins) installs from
+# pyproject.toml. The demo needs the package alone; the tests also need the `test` extra.
 if [ ! -x .venv/bin/python ]; then
     python3 -m venv .venv
 fi
 if [ ! -x .venv/bin/uv ]; then
     .venv/bin/python -m pip install -q --disable-pip-version-check 'uv>=0.4'
 fi
-stamp=.venv/.orthosim-installed
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ tools/overrides.txt -nt "$stamp" ]; then
+if [ "$action" = demo ]; then extra=""; stamp=.venv/.orthosim-installed-demo; else extra="[test]"; stamp=.venv/.orthosim-installed; fi
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+    # pyrender's fork installs the same `pyrender` folder: the old pyrender must go first, not after
+    if .venv/bin/uv pip show -q --python .venv/bin/python pyrender >/dev/null 2>&1; then
+        .venv/bin/uv pip uninstall -q --python .venv/bin/python pyrender
+    fi
     # --compile-bytecode: imports read ready .pyc files instead of compiling every module on every
     # run where __pycache__ cannot be written (or PYTHONDONTWRITEBYTECODE is set): seconds per start
-    .venv/bin/uv pip install -q --compile-bytecode --python .venv/bin/python --override tools/overrides.txt -e '.[test]'
+    .venv/bin/uv pip install -q --compile-bytecode --python .venv/bin/python -e ".$extra"
     touch "$stamp"
 fi
 # our own sources are an editable install, which uv does not compile: without their .pyc files every
 # process compiles orthosim and render again (0.19 s of CPU per process, measured); up-to-date files are skipped
 .venv/bin/python -m compileall -q orthosim render bench >/dev/null
 
-export PYOPENGL_PLATFORM=osmesa
 case "$action" in
     install) echo "dev.sh: installed; run .venv/bin/orthosim --help" ;;
     demo) exec .venv/bin/orthosim demo "$@" ;;

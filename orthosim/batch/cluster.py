@@ -4,8 +4,8 @@ Dask does the distributing; this module only turns runs into tasks and their res
 run folders. Each task carries its case text and runs into a private folder on its worker
 (`worker.execute_shipped`), and returns the folder's files, which are written here into
 `DIR/<run-id>/`, run.json last, exactly as a local worker would have left them: the workers need
-not see the batch folder. They need the orthosim package, OSMesa, and read access to the meshes a
-mesh-based case names (the parametric model needs none). A worker that dies mid-run is Dask's to
+not see the batch folder. They need the orthosim package, offscreen GL (EGL or OSMesa), and read
+access to the meshes a mesh-based case names (the parametric model needs none). A worker that dies mid-run is Dask's to
 handle: the scheduler gives its task to another worker, and after
 `distributed.scheduler.allowed-failures` deaths (3 by default) reports `KilledWorker`, which fails
 that run only. `--run-timeout` on a cluster: the run is recorded as failed once it has been

@@ -35,7 +35,6 @@ WORKER_ENV = {
     "OMP_NUM_THREADS": "1",
     "OPENBLAS_NUM_THREADS": "1",
     "MKL_NUM_THREADS": "1",
-    "PYOPENGL_PLATFORM": "osmesa",
 }
 
 # What a local worker asks of each run (`run_case`'s render_opts, `orthosim.runtime.run.RunOptions`): one

@@ -24,7 +24,16 @@ from orthosim.errors import CaseError
 from orthosim.exchange.casefields import FieldReader, teeth_list
 from orthosim.staging.target import CaseStaging, read_case_staging
 
-CASES_DIR = Path(__file__).resolve().parents[2] / "cases"
+
+def _cases_dir() -> Path:
+    """The shipped case files: `orthosim/cases/` in an installed wheel (package data), else the
+    checkout's top-level `cases/` folder (an editable install or a source tree)."""
+    package = Path(__file__).resolve().parents[1]
+    installed = package / "cases"
+    return installed if installed.is_dir() else package.parent / "cases"
+
+
+CASES_DIR = _cases_dir()
 DEFAULT_CASE = CASES_DIR / "case1_first_premolar_extraction.toml"  # the demo's and the bench's case
 DIRECTIONS = ("mesial", "distal", "labial", "lingual", "occlusal", "apical")
 POINTS = ("bracket", "crown_center", "center_of_resistance")

@@ -72,6 +72,7 @@ class RunOptions:
     simulate_in_process: bool = False  # batch workers: one per core already, so no simulation child per run
     single_core: bool = False  # batch workers: also simulate, draw and encode on one thread, ffmpeg on one (implies simulate_in_process)
     verbosity: int = 1
+    gl: str | None = None  # offscreen OpenGL backend asked for (--gl): auto, egl, osmesa; None: ORTHOSIM_GL, else auto
 
 
 @dataclass

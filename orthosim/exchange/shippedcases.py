@@ -1,0 +1,96 @@
+"""The case files orthosim ships (`CASES_DIR`: the checkout's `cases/`, or `orthosim/cases/` in an
+installed wheel), listed and copied by `orthosim cases`, so that a user who installed orthosim with
+pip can see what there is and start from a copy of their own.
+
+Each case is read with the same reader as `orthosim run` (`load_case`), so the list shows what a
+run would see; a case whose teeth come from the Open-Full-Jaw data is marked, because its mesh
+folders are named relative to the case file and the data does not travel with orthosim.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import click
+
+from orthosim.errors import CaseError
+
+
+@dataclass(frozen=True)
+class ShippedCase:
+    """One shipped case file: `name` (file stem), its path, title, model kind and simulated days."""
+
+    name: str
+    path: Path
+    title: str
+    model_kind: str
+    duration_days: float
+
+    @property
+    def needs_data(self) -> bool:
+        """True when the teeth are read from mesh folders outside orthosim (the Open-Full-Jaw data)."""
+        return self.model_kind != "parametric"
+
+
+def shipped_cases() -> list[ShippedCase]:
+    """Every shipped case, sorted by name (read from the TOML text; nothing is built)."""
+    from orthosim.exchange.case import CASES_DIR
+
+    cases = []
+    for path in sorted(CASES_DIR.glob("*.toml")):
+        data = tomllib.loads(path.read_text())
+        cases.append(ShippedCase(name=path.stem, path=path, title=str(data.get("case", {}).get("name", path.stem)),
+                                 model_kind=str(data.get("model", {}).get("kind", "parametric")),
+                                 duration_days=float(data.get("treatment", {}).get("duration_days", 0.0))))
+    return cases
+
+
+def find_shipped_case(name: str) -> ShippedCase:
+    """The shipped case called `name` (file stem, with or without .toml); CaseError naming the choices."""
+    stem = name[:-5] if name.endswith(".toml") else name
+    cases = {c.name: c for c in shipped_cases()}
+    if stem not in cases:
+        raise CaseError(name, None, "is not a shipped case",
+                        f"give one of: {', '.join(cases)} (orthosim cases lists them)")
+    return cases[stem]
+
+
+def copy_shipped_case(name: str, dest: Path) -> Path:
+    """Copy shipped case `name` into folder `dest` (or to the file `dest` when it ends in .toml).
+
+    Never overwrites: an existing target is a CaseError naming it. Written atomically. Returns the
+    path written.
+    """
+    from orthosim.storage.atomic import write_text
+
+    case = find_shipped_case(name)
+    target = Path(dest) if str(dest).endswith(".toml") else Path(dest) / case.path.name
+    if target.exists():
+        raise CaseError(target, None, "already exists", "give another folder or file name, or remove it first")
+    write_text(target, case.path.read_text())
+    return target
+
+
+@click.command("cases")
+@click.option("--copy", "copy", nargs=2, default=None, metavar="NAME DEST",
+              help="Copy shipped case NAME into folder DEST (or to DEST when it ends in .toml) to start from.")
+def cases(copy: tuple[str, str] | None) -> None:
+    """List the case files shipped with orthosim, or copy one to start from."""
+    if copy:
+        name, dest = copy
+        target = copy_shipped_case(name, Path(dest))
+        note = (" (its teeth are read from mesh folders named relative to the file: edit [model] folder)"
+                if find_shipped_case(name).needs_data else "")
+        click.echo(f"copied {name} -> {target}{note}; run it with: orthosim run {target}")
+        return
+    rows = shipped_cases()
+    width = max((len(c.name) for c in rows), default=0)
+    for c in rows:
+        data = " [needs the Open-Full-Jaw data]" if c.needs_data else ""
+        span = f" ({c.duration_days:g} days)" if c.duration_days else ""  # staging cases: a set-up, no treatment time
+        click.echo(f"{c.name:<{width}}  {c.title}{span}{data}")
+    from orthosim.exchange.case import CASES_DIR
+
+    click.echo(f"{len(rows)} cases in {CASES_DIR}; copy one with: orthosim cases --copy NAME DIR")
