@@ -16,13 +16,17 @@ as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 # Chromium is only for the tests and `orthosim report --pdf`; on a stock Debian python3, the venv module.
 need=()
 dpkg -s libegl-mesa0 >/dev/null 2>&1 || need+=(libegl-mesa0 libegl1)
-if ! dpkg -s libosmesa6 >/dev/null 2>&1 && apt-cache show libosmesa6 >/dev/null 2>&1; then need+=(libosmesa6); fi
 # headless Chromium prints `orthosim report --pdf` and is the browser the report tests load the page in
 if [ "$action" != demo ]; then command -v chromium >/dev/null 2>&1 || need+=(chromium); fi
 python3 -c 'import ensurepip, venv' >/dev/null 2>&1 || need+=(python3-venv)
+osmesa_missing=0
+dpkg -s libosmesa6 >/dev/null 2>&1 || osmesa_missing=1
+if [ "${#need[@]}" -gt 0 ] || [ "$osmesa_missing" = 1 ]; then
+    as_root apt-get update -qq  # package lists first: a fresh machine may have none
+    if [ "$osmesa_missing" = 1 ] && apt-cache show libosmesa6 >/dev/null 2>&1; then need+=(libosmesa6); fi
+fi
 if [ "${#need[@]}" -gt 0 ]; then
     echo "dev.sh: installing system packages: ${need[*]}"
-    as_root apt-get update -qq
     DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq "${need[@]}" >/dev/null
 fi
 
