@@ -100,3 +100,18 @@ def test_every_module_imports_in_a_fresh_interpreter():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stdout + done.stderr
     assert importlib.util.find_spec("render") is None or "site-packages" not in str(importlib.util.find_spec("render").origin)
+
+
+MAX_FUNCTION_LINES = 80
+
+
+def test_no_function_of_the_product_or_its_measurement_is_over_80_lines():
+    """A function a newcomer can read in one screen: the product, the renderer and the bench alike."""
+    long = []
+    for name, path in _modules().items():
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lines = node.end_lineno - node.lineno + 1
+                if lines > MAX_FUNCTION_LINES:
+                    long.append(f"{name}.{node.name}: {lines} lines")
+    assert not long, long
