@@ -103,7 +103,7 @@ def test_report_json_figures_equal_the_metrics_of_the_runs(report):
                         "distances"):
                 assert shown[key] == metrics[key], key
             for n, t in metrics["teeth"].items():
-                assert shown["teeth"][n] == {k: t[k] for k in ("moved_mm", "rotated_deg", "extracted")}
+                assert shown["teeth"][n] == {k: t[k] for k in ("moved_mm", "rotated_deg", "extracted", "root")}
             assert [p["total_mm"] for p in shown["totals_over_days"]] == [s["total_distance_mm"] for s in steps]
             assert [p["day"] for p in shown["totals_over_days"]] == [s["time_days"] for s in steps]
             assert case["largest_interpenetration_mm"][det] == metrics["max_penetration_mm"]

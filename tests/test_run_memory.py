@@ -75,8 +75,8 @@ def test_a_step_record_unpickles_without_the_simulations_imports():
 def test_the_drawing_process_of_a_drawn_run_never_imports_numba(tmp_path):
     # the main process (it draws) reports its imports at exit; the forked child ends with os._exit
     probe = ("import atexit, json, sys\n"
-             "atexit.register(lambda: print(json.dumps([m for m in ('numba', 'orthosim.collision', 'pyrender') "
-             "if m in sys.modules]), file=sys.stderr))\n"
+             "atexit.register(lambda: print(json.dumps([m for m in ('numba', 'orthosim.collision.detect', "
+             "'orthosim.collision.model', 'orthosim.collision.queries', 'pyrender') if m in sys.modules]), file=sys.stderr))\n"
              "sys.argv = ['orthosim'] + sys.argv[1:]\n"
              "from orthosim.cli import entry\nentry()\n")
     env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa"}
