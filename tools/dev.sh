@@ -56,6 +56,6 @@ fi
 case "$action" in
     install) echo "dev.sh: installed; run .venv/bin/orthosim --help" ;;
     demo) exec .venv/bin/orthosim demo "$@" ;;
-    test) exec .venv/bin/python -m pytest "$@" ;;
+    test) exec .venv/bin/python -m pytest -n auto "$@" ;;  # pytest-xdist: one worker per core
     *) echo "dev.sh: unknown action '$action' (use demo, test or install)" >&2; exit 2 ;;
 esac
