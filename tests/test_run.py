@@ -195,3 +195,24 @@ def test_collide_step_queries_a_case_at_a_simulation_step():
     assert [11, 21] not in before["touching"] and [11, 21] in after["touching"]
     late = orthosim("collide", "step", "cases/case3_incisor_space_closure.toml", "--step", "10")
     assert late.returncode == 2 and "past the case's last step (9)" in late.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.real_data
+def test_a_real_jaw_runs_metrics_follow_the_published_schema_too(tmp_path):
+    """Mesh models say what they are (`model.kind`) like the parametric one: the schema holds for every kind."""
+    import jsonschema
+
+    text = (ROOT / "cases" / "open_full_jaw_case2_second_premolar_extraction.toml").read_text()
+    step = re.search(r"(?m)^step_days = (\d+)", text).group(1)
+    text, n = re.subn(r"(?m)^duration_days = \d+", f"duration_days = {step}", text)  # one step
+    assert n == 1
+    case = tmp_path / "real_one_step.toml"
+    from orthosim.exchange.shareddata import shared_data_dir
+
+    case.write_text(text.replace('"../../shared/data/', f'"{shared_data_dir().as_posix()}/'))
+    run_case(case, tmp_path / "out", RunOptions(render=False, verbosity=0))
+    schema = json.loads(resources.files("orthosim").joinpath("schema/metrics.schema.json").read_text())
+    metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    jsonschema.validate(metrics, schema)
+    assert metrics["model"]["kind"] == "open-full-jaw"

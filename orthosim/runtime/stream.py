@@ -67,7 +67,7 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, 
         yield record
     report.finish_streams(out_dir)
     metrics = report.metrics()
-    metrics["model"] = model_summary(dent)
+    metrics["model"] = {"kind": case.model.kind, **model_summary(dent)}  # every model says what it is (the schema asks)
     metrics["occlusion"] = occlusion_summary(dent)  # the initial model's
     metrics["occlusion_final"] = occlusion_summary(dent, {n: report.last.poses[n] for n in dent.fdis})
     yield RunResult(metrics, report.distances_csv(), model_files(dent))
