@@ -53,6 +53,7 @@ import os
 import platform
 import statistics
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -249,8 +250,8 @@ def _step_against_detector(movement_model, detector: str, n_states: int, warmup:
             "target_ratio": 3.0}
 
 
-def _overlay_figures(end_to_end, in_child_process, simulate_case, case_obj, detector, n_states, dentition,
-                     extracted, e2e_off, rounds: int = 3) -> dict:
+def _overlay_figures(end_to_end, run_records, case_obj, detector, n_states, extracted, e2e_off,
+                     rounds: int = 3) -> dict:
     """end_to_end with the frame overlay drawn (caption, day counter, legend; then with FDI labels
     too) against end_to_end without it, in `rounds` rounds of the three in turn (so a change of the
     machine's load during the bench falls on all three alike); each ratio is the median over the
@@ -264,8 +265,7 @@ def _overlay_figures(end_to_end, in_child_process, simulate_case, case_obj, dete
     fps: dict[str, list[float]] = {name: [] for name in variants}
     for _ in range(rounds):
         for name, caption in variants.items():
-            with in_child_process(simulate_case, case_obj, detector, n_states - 1, dentition=dentition,
-                                  ignore_warnings=True) as records:
+            with run_records(n_states - 1) as records:
                 rec = end_to_end((FrameState.from_step(r, extracted) for r in records), caption=caption)
             fps[name].append(rec["fps"])
     out = {"rounds": rounds, "end_to_end_fps": e2e_off["fps"], "fps_per_round": fps}
@@ -496,11 +496,10 @@ def _simulated_figures(plan: BenchPlan, model: _BenchModel, encode: list[str]) -
     import functools
 
     from orthosim.movement.simulation import MovementModel, simulate as simulate_steps
-    from orthosim.movement.simulation import simulate_case
-    from orthosim.runtime.background import in_child_process
 
     case, dentition, extracted, detector, n_states = model.case, model.dentition, model.extracted, plan.detector, plan.n_states
     end_to_end = functools.partial(_end_to_end, plan, dentition)
+    run_records = functools.partial(_run_records, model, detector)
     movement_model = MovementModel.build(case, dentition=dentition)
     gen = simulate_steps(movement_model, detector, steps=n_states)
     sim_times = []
@@ -512,43 +511,62 @@ def _simulated_figures(plan: BenchPlan, model: _BenchModel, encode: list[str]) -
     gen.close()
     out = {"fps_sim": _median_fps(sim_times),
            "sim_vs_detector": _step_against_detector(movement_model, detector, n_states, plan.warmup)}
-    # the pipeline of `orthosim run`: the simulation in a child process (orthosim.runtime.background),
-    # running ahead of the drawing through a bounded queue, so that it does not take turns
-    # with the drawing and encoding for this process's GIL
+    # the pipeline of `orthosim run`: its own simulation side (the run strategy it would choose here,
+    # orthosim.runtime.strategies: a child process, since this one holds a GL context), running ahead
+    # of the drawing through a bounded queue and streaming steps.jsonl as a run does
     sim_steps = f"simulation step (orthosim.movement, {detector} detector)"
-    with in_child_process(simulate_case, case, detector, n_states - 1, dentition=dentition, ignore_warnings=True) as records:
+    with run_records(n_states - 1) as records:
         e2e_sim = end_to_end(FrameState.from_step(rec, extracted) for rec in records)
-    e2e_sim["includes"] = [f"{sim_steps} in a child process (orthosim.runtime.background), records sent "
-                           "through a bounded queue", "scene update", "draw", "colour read-back", *encode]
+    e2e_sim["includes"] = [f"{sim_steps} in a child process (orthosim.runtime.strategies, as `orthosim run`), records "
+                           "sent through a bounded queue", "scene update", "draw", "colour read-back", *encode]
     out["e2e_sim"] = e2e_sim
-    out["e2e_overlay"] = _overlay_figures(end_to_end, in_child_process, simulate_case, case, detector, n_states,
-                                          dentition, extracted, e2e_sim)
+    out["e2e_overlay"] = _overlay_figures(end_to_end, run_records, case, detector, n_states, extracted, e2e_sim)
     # the same with the simulation on a thread of this process (`animation.prefetch` alone):
     # what the child process buys, measured in this run
     e2e_thread = end_to_end(FrameState.from_step(rec, extracted)
                             for rec in simulate_steps(movement_model, detector, steps=n_states - 1))
     e2e_thread["includes"] = [f"{sim_steps} on a thread of the drawing process (animation.prefetch)", *e2e_sim["includes"][1:]]
     out["e2e_thread"] = e2e_thread
-    out["e2e_interp"] = _interpolated_figure(plan, model, end_to_end, e2e_sim) if plan.frames_per_step > 1 else None
+    out["e2e_interp"] = (_interpolated_figure(plan, model, end_to_end, run_records, e2e_sim)
+                         if plan.frames_per_step > 1 else None)
     from orthosim_bench.collision import collision_timings
 
     out["collision"] = collision_timings(dentition, model=movement_model.collision, repeats=plan.collision_repeats)
     return out
 
 
-def _interpolated_figure(plan: BenchPlan, model: _BenchModel, end_to_end, e2e_sim: dict) -> dict:
+@contextmanager
+def _run_records(model: "_BenchModel", detector: str, steps: int):
+    """The step records of `orthosim run`'s own simulation side for `steps` steps of the case: the run
+    strategy `orthosim run` would choose in this process (`orthosim.runtime.strategies`), its run
+    folder files streamed into a temporary folder as a run's are."""
+    import dataclasses
+    import tempfile
+    from contextlib import ExitStack
+
+    from orthosim.movement.records import StepRecord
+    from orthosim.runtime.run import RunLog
+    from orthosim.runtime.strategies import SpawnedChild, choose_strategy
+
+    case = dataclasses.replace(model.case, duration_days=steps * model.case.step_days)
+    strategy = choose_strategy(False)
+    if isinstance(strategy, SpawnedChild):
+        strategy = SpawnedChild(model.dentition)  # the teeth are loaded here already
+    with tempfile.TemporaryDirectory(prefix="orthosim-bench-run-") as out, ExitStack() as stack:
+        source = strategy.start(case, detector, out, RunLog(0), stack)
+        yield (r for r in source.records if isinstance(r, StepRecord))
+
+
+def _interpolated_figure(plan: BenchPlan, model: _BenchModel, end_to_end, run_records, e2e_sim: dict) -> dict:
     """What `orthosim run` does by default: frames interpolated between steps."""
     import itertools
 
-    from orthosim.movement.simulation import simulate_case
-    from orthosim.runtime.background import in_child_process
     from orthosim_render.timeline import frames_from_steps
 
     # warm up over the same simulation steps as the other figures (a case's first steps,
     # where collisions are resolved, are much slower than the rest)
     warm = 1 + (plan.warmup - 1) * plan.frames_per_step
-    with in_child_process(simulate_case, model.case, plan.detector, plan.n_states, dentition=model.dentition,
-                          ignore_warnings=True) as records:
+    with run_records(plan.n_states) as records:
         steps = frames_from_steps(records, model.extracted, plan.frames_per_step)
         e2e_interp = end_to_end(itertools.islice(steps, warm + plan.frames), warm=warm)
     e2e_interp["frames_per_step"] = plan.frames_per_step
