@@ -65,14 +65,33 @@ def pytest_configure(config) -> None:
         raise pytest.UsageError(f"--orthosim-results {results}: is a file, not a folder (fix: give a folder path)")
 
 
+_PARTS = ".orthosim-worker-parts"  # DIR/<this>/<worker>.json: each pytest-xdist worker's checks, for the controller
+
+
 def pytest_sessionfinish(session, exitstatus) -> None:
+    """Write the results page once: a pytest-xdist worker hands its checks to the controller through
+    a part file in DIR (its session ends before the controller's), the controller (or a session
+    without workers) writes the page of every check."""
     config = session.config
     results = config.getoption("orthosim_results", None)
     if not results:
         return
-    from orthosim_render.report.regression_page import write_results
+    from orthosim_render.report.regression_page import read_worker_part, write_results, write_worker_part
 
-    write_results(Path(results), config.stash.get(_RESULTS, []))
+    folder = Path(results)
+    records = list(config.stash.get(_RESULTS, []))
+    worker = getattr(config, "workerinput", None)
+    if worker is not None:
+        if records:
+            write_worker_part(folder / _PARTS / f"{worker['workerid']}.json", records)
+        return
+    parts = sorted((folder / _PARTS).glob("*.json")) if (folder / _PARTS).is_dir() else []
+    for part in parts:
+        records += read_worker_part(part)
+        part.unlink()
+    if parts:
+        (folder / _PARTS).rmdir()
+    write_results(folder, sorted(records, key=lambda r: r.test) if parts else records)
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:

@@ -116,3 +116,28 @@ def test_results_pointing_at_a_file_is_refused_in_one_line(tmp_path):
     (tmp_path / "test_nothing.py").write_text("def test_nothing():\n    pass\n")
     r = pytest_in(tmp_path, "test_nothing.py", "--orthosim-results", str(tmp_path / "taken"))
     assert r.returncode == 4 and "--orthosim-results" in r.stderr and "is a file" in r.stderr
+
+
+def test_a_session_on_several_pytest_xdist_workers_writes_one_page_of_every_workers_failures(session_with_two_failures):
+    """CI jobs run their tests on every core: each worker hands its checks to the controller, which
+    writes the one page (no worker's page overwrites another's, no part file is left behind)."""
+    pytest.importorskip("xdist")
+    project, _, _ = session_with_two_failures
+    results = project / "results_xdist"
+    run = pytest_in(project, "test_arch.py", "-n", "2", "--orthosim-results", str(results))
+    assert "2 failed, 2 passed" in run.stdout, run.stdout + run.stderr
+    summary = json.loads((results / "summary.json").read_text())
+    assert summary["failed"] == 2
+    assert sorted(c["test"].split("::")[1] for c in summary["checks"]) == ["test_canine_position", "test_lower_incisors"]
+    assert sorted(p.name for p in results.iterdir()) == ["index.html", "summary.json"]
+    assert (results / "index.html").read_text().count("data:image/png;base64,") == 8
+
+
+def test_a_damaged_worker_part_is_refused_in_one_line(tmp_path):
+    from orthosim_render.imageerrors import ImageInputError
+    from orthosim_render.report.regression_page import read_worker_part
+
+    part = tmp_path / "gw0.json"
+    part.write_text('{"format": 1, "checks": [{"test": "t"}]')  # truncated
+    with pytest.raises(ImageInputError, match="damaged"):
+        read_worker_part(part)

@@ -11,6 +11,7 @@ still writes both, saying so, so that a CI job's artifact step always finds them
 from __future__ import annotations
 
 import base64
+import dataclasses
 import datetime
 import html
 from dataclasses import asdict, dataclass
@@ -95,6 +96,48 @@ def render_page(records: list[CheckRecord], created: str) -> str:
     counts = {status: sum(r.status == status for r in records) for status in ("failed", "regenerated", "new")}
     return env.get_template("regression.html.j2").render(checks=checks, counts=counts, created=created,
                                                          version=__version__, escape=html.escape)
+
+
+_BYTES_FIELDS = ("golden_png", "candidate_png", "diff_png", "changes_png")
+
+
+def write_worker_part(path: Path, records: list[CheckRecord]) -> None:
+    """A pytest-xdist worker's checks as JSON (PNG bytes in base64), written atomically for the controller."""
+
+    rows = []
+    for r in records:
+        row = dataclasses.asdict(r)
+        for key in _BYTES_FIELDS:
+            row[key] = None if row[key] is None else base64.b64encode(row[key]).decode("ascii")
+        rows.append(row)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    write_json(path, {"format": SUMMARY_FORMAT, "checks": rows})
+
+
+def read_worker_part(path: Path) -> list[CheckRecord]:
+    """The checks a worker wrote (`write_worker_part`); a part that is not whole and well formed is
+    refused in one line (`ImageInputError`), never half used."""
+    import binascii
+    import json
+
+    try:
+        data = json.loads(Path(path).read_text())
+        if data.get("format") != SUMMARY_FORMAT:
+            raise ValueError(f"format {data.get('format')!r}")
+        fields = {f.name for f in dataclasses.fields(CheckRecord)}
+        records = []
+        for row in data["checks"]:
+            if set(row) != fields:
+                raise ValueError("a check with other fields")
+            for key in _BYTES_FIELDS:
+                row[key] = None if row[key] is None else base64.b64decode(row[key], validate=True)
+            records.append(CheckRecord(**row))
+        return records
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, binascii.Error) as exc:
+        from orthosim_render.imageerrors import ImageInputError
+
+        raise ImageInputError(path, None, f"a worker's image-check results are damaged ({exc})",
+                              "run the session again") from None
 
 
 def write_results(folder: Path, records: list[CheckRecord]) -> tuple[Path, Path]:
