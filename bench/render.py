@@ -546,12 +546,10 @@ def _run_records(model: "_BenchModel", detector: str, steps: int):
 
     from orthosim.movement.records import StepRecord
     from orthosim.runtime.run import RunLog
-    from orthosim.runtime.strategies import SpawnedChild, choose_strategy
+    from orthosim.runtime.strategies import choose_strategy
 
     case = dataclasses.replace(model.case, duration_days=steps * model.case.step_days)
-    strategy = choose_strategy(False)
-    if isinstance(strategy, SpawnedChild):
-        strategy = SpawnedChild(model.dentition)  # the teeth are loaded here already
+    strategy = choose_strategy(False, model.dentition)  # the teeth are loaded here already
     with tempfile.TemporaryDirectory(prefix="orthosim-bench-run-") as out, ExitStack() as stack:
         source = strategy.start(case, detector, out, RunLog(0), stack)
         yield (r for r in source.records if isinstance(r, StepRecord))

@@ -204,11 +204,15 @@ def choose(request: str) -> GLBackend:
     gets here, or RenderSetupError naming the fix."""
     if request not in CHOICES + DEVICE_CHOICES:
         raise RenderSetupError("--gl", request, "is not an OpenGL backend", f"use one of {', '.join(CHOICES)}")
-    candidates = (probe_egl() if request != "osmesa" else []) + (
-        probe_osmesa() if request in ("auto", "osmesa") else [])
-    if request in DEVICE_CHOICES:
-        candidates = [b for b in candidates if b.label == request]
-        request = "egl"
+    if request == "osmesa":
+        candidates = probe_osmesa()
+    else:
+        candidates = probe_egl()
+        if request in DEVICE_CHOICES:
+            candidates = [b for b in candidates if b.label == request]
+            request = "egl"
+        elif request == "auto" and not candidates:  # OSMesa only where no EGL device starts
+            candidates = probe_osmesa()
     if not candidates:
         what = {"auto": "neither EGL nor OSMesa", "egl": "no EGL device", "osmesa": "OSMesa"}[request]
         raise RenderSetupError(f"--gl {request}", None, f"cannot start offscreen OpenGL: {what} can create a "

@@ -102,10 +102,6 @@ def _discrete_step(model, P0, P1, pairs_arr, pair_idx, request, queries) -> Step
                       **_leaf_arrays(model, pair_idx, pair, la, lb, P1, P1, W=W))
 
 
-def _exact_reference_step(model, P0, P1, pairs_arr, pair_idx, request, queries) -> StepResult:
-    return _exact_step(P1, pairs_arr, pair_idx, request, queries or ExactQueries(model))
-
-
 def _continuous_step(model, P0, P1, pairs_arr, pair_idx, request, queries) -> StepResult:
     """Detector 3 over the motion P0 -> P1: each pair's time of first contact (refined on the exact
     meshes on request), and the leaves overlapping when it first touches, drawn where they are then."""
@@ -158,10 +154,6 @@ def _place_drawn_leaves(model, leaves, pair_idx, pair, la, lb, toc, P0, P1, W0, 
         leaves["centers_b"][sel] = redo["centers_b"]
 
 
-_STEP = {"circles": _circles_step, "discrete": _discrete_step, "continuous": _continuous_step,
-         "exact": _exact_reference_step}
-
-
 def _leaf_arrays(model, pair_idx, pair, la, lb, Pa, Pb, per_pair=False, W=None):
     """Leaf-pair arrays of a StepResult from flat leaf nodes; Pa, Pb are per-body poses, or per
     tooth pair (per_pair) when each pair is drawn at its own time; W: world centres if known."""
@@ -184,9 +176,11 @@ def _leaf_arrays(model, pair_idx, pair, la, lb, Pa, Pb, per_pair=False, W=None):
     )
 
 
-def _exact_step(P, pairs_arr, pair_idx, request, queries: ExactQueries):
-    """FCL on every pair: touching, distance; with all_leaf_pairs, contact points as zero-radius
-    'leaves' and the intersecting face index pairs in `leaf_pairs`."""
+def _exact_step(model, P0, P, pairs_arr, pair_idx, request, queries: ExactQueries | None) -> StepResult:
+    """The exact reference at the end poses `P`: FCL on every pair: touching, distance; with
+    all_leaf_pairs, contact points as zero-radius 'leaves' and the intersecting face index pairs in
+    `leaf_pairs`."""
+    queries = queries or ExactQueries(model)
     p = len(pair_idx)
     touching = np.zeros(p, bool)
     dist = np.zeros(p)
@@ -205,6 +199,11 @@ def _exact_step(P, pairs_arr, pair_idx, request, queries: ExactQueries):
         leaves.update(pair_of_leaf=np.concatenate(owner).astype(np.int64), leaf_pairs=np.concatenate(faces),
                       centers_a=c, centers_b=c.copy(), radii_a=np.zeros(len(c)), radii_b=np.zeros(len(c)))
     return StepResult("exact", pairs_arr, touching, np.full(p, np.nan), distance=dist, **leaves)
+
+
+# each detector's step, by its name (`detect_step` dispatches through it)
+_STEP = {"circles": _circles_step, "discrete": _discrete_step, "continuous": _continuous_step,
+         "exact": _exact_step}
 
 
 def contacts(model: CollisionModel, poses: Mapping[int, np.ndarray], request: CollisionRequest, queries: ExactQueries,

@@ -106,11 +106,12 @@ class ForkedChild:
         return SimulationSource(dent, child, "beside the drawing")
 
 
-def choose_strategy(in_process: bool) -> RunStrategy:
+def choose_strategy(in_process: bool, dentition=None) -> RunStrategy:
     """In this process when asked (`--single-core`, tests), else a forked child where fork is safe
-    (no thread running yet), else a spawned one."""
+    (no thread running yet), else a spawned one. `dentition`: the teeth, when this process has
+    loaded them already (a spawned child is handed them where the cache cannot serve it)."""
     if in_process:
         return InProcess()
     from orthosim.runtime.background import fork_is_safe
 
-    return ForkedChild() if fork_is_safe() else SpawnedChild()
+    return ForkedChild() if fork_is_safe() else SpawnedChild(dentition)
