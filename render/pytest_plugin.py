@@ -43,6 +43,7 @@ import pytest
 
 _REWRITTEN = pytest.StashKey[list]()
 _RESULTS = pytest.StashKey[list]()  # orthosim_render.report.regression_page.CheckRecord, in check order
+_PARTS = ".orthosim-worker-parts"  # DIR/<this>/<worker>.json: each pytest-xdist worker's checks, for the controller
 
 
 def pytest_addoption(parser) -> None:
@@ -63,9 +64,10 @@ def pytest_configure(config) -> None:
     results = config.getoption("orthosim_results", None)
     if results and Path(results).exists() and not Path(results).is_dir():
         raise pytest.UsageError(f"--orthosim-results {results}: is a file, not a folder (fix: give a folder path)")
+    if results and not hasattr(config, "workerinput"):  # the controller, before its workers start
+        import shutil
 
-
-_PARTS = ".orthosim-worker-parts"  # DIR/<this>/<worker>.json: each pytest-xdist worker's checks, for the controller
+        shutil.rmtree(Path(results) / _PARTS, ignore_errors=True)  # an interrupted session's leftovers are not this one's
 
 
 def pytest_sessionfinish(session, exitstatus) -> None:
@@ -76,6 +78,7 @@ def pytest_sessionfinish(session, exitstatus) -> None:
     results = config.getoption("orthosim_results", None)
     if not results:
         return
+    from orthosim_render.imageerrors import ImageInputError
     from orthosim_render.report.regression_page import read_worker_part, write_results, write_worker_part
 
     folder = Path(results)
@@ -87,7 +90,10 @@ def pytest_sessionfinish(session, exitstatus) -> None:
         return
     parts = sorted((folder / _PARTS).glob("*.json")) if (folder / _PARTS).is_dir() else []
     for part in parts:
-        records += read_worker_part(part)
+        try:
+            records += read_worker_part(part)
+        except ImageInputError as err:  # refused whole, in one line: no page half made of it
+            pytest.exit(f"orthosim: {err}", returncode=2)
         part.unlink()
     if parts:
         (folder / _PARTS).rmdir()

@@ -141,3 +141,15 @@ def test_a_damaged_worker_part_is_refused_in_one_line(tmp_path):
     part.write_text('{"format": 1, "checks": [{"test": "t"}]')  # truncated
     with pytest.raises(ImageInputError, match="damaged"):
         read_worker_part(part)
+
+
+def test_an_interrupted_sessions_leftover_worker_part_is_not_merged_into_the_next_page(tmp_path):
+    out = tmp_path / "out"
+    stale = out / ".orthosim-worker-parts" / "gw0.json"
+    stale.parent.mkdir(parents=True)
+    stale.write_text("{}")  # what a killed worker may leave behind
+    (tmp_path / "test_nothing.py").write_text("def test_nothing(orthosim_image_regression):\n    pass\n")
+    r = pytest_in(tmp_path, "test_nothing.py", "--orthosim-results", str(out))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert json.loads((out / "summary.json").read_text())["checks"] == []
+    assert sorted(p.name for p in out.iterdir()) == ["index.html", "summary.json"]
