@@ -537,22 +537,12 @@ def _simulated_figures(plan: BenchPlan, model: _BenchModel, encode: list[str]) -
 
 @contextmanager
 def _run_records(model: "_BenchModel", detector: str, steps: int):
-    """The step records of `orthosim run`'s own simulation side for `steps` steps of the case: the run
-    strategy `orthosim run` would choose in this process (`orthosim.runtime.strategies`), its run
-    folder files streamed into a temporary folder as a run's are."""
-    import dataclasses
-    import tempfile
-    from contextlib import ExitStack
+    """The step records of `orthosim run`'s own simulation side for `steps` steps of the case
+    (`orthosim.runtime.strategies.step_records`: the strategy `orthosim run` would choose here)."""
+    from orthosim.runtime.strategies import step_records
 
-    from orthosim.movement.records import StepRecord
-    from orthosim.runtime.run import RunLog
-    from orthosim.runtime.strategies import choose_strategy
-
-    case = dataclasses.replace(model.case, duration_days=steps * model.case.step_days)
-    strategy = choose_strategy(False, model.dentition)  # the teeth are loaded here already
-    with tempfile.TemporaryDirectory(prefix="orthosim-bench-run-") as out, ExitStack() as stack:
-        source = strategy.start(case, detector, out, RunLog(0), stack)
-        yield (r for r in source.records if isinstance(r, StepRecord))
+    with step_records(model.case, detector, steps, dentition=model.dentition) as source:  # the teeth are loaded here already
+        yield source.records
 
 
 def _interpolated_figure(plan: BenchPlan, model: _BenchModel, end_to_end, run_records, e2e_sim: dict) -> dict:

@@ -127,13 +127,15 @@ class SimulatedCase:
 
 @functools.lru_cache(maxsize=4)
 def _simulated(case_file: Path, case_sha256: str, detector: str | None, steps: int | None) -> SimulatedCase:
+    """The case simulated as `orthosim run --single-core` simulates it (`runtime.strategies.step_records`,
+    in this process: the records are all needed before the first frame is drawn)."""
     from orthosim.exchange.case import load_case
-    from orthosim.movement.simulation import MovementModel, simulate
+    from orthosim.runtime.strategies import step_records
 
     case = load_case(case_file)
-    model = MovementModel.build(case)
-    records = tuple(simulate(model, detector or case.detector, steps))
-    return SimulatedCase(case_file, case_sha256, model.dentition, frozenset(case.extractions), records)
+    with step_records(case, detector or case.detector, steps, in_process=True) as source:
+        records = tuple(source.records)
+    return SimulatedCase(case_file, case_sha256, source.dentition, frozenset(case.extractions), records)
 
 
 def simulate_case_once(case_file: str | Path, detector: str | None = None, steps: int | None = None) -> SimulatedCase:

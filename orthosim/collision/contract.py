@@ -117,6 +117,14 @@ class StepResult:
     def touching_pairs(self) -> list[tuple[int, int]]:
         return [(a, b) for (a, b), hit in zip(self.pairs.tolist(), self.touching.tolist()) if hit]
 
+    def first_contacts(self) -> list[tuple[tuple[int, int], float]]:
+        """Each touching pair with the time (0-1 of the step) it is first found in contact: its time
+        of first contact from a detector that sweeps the motion, the step's end (1.0) from one that
+        tests the end poses."""
+        times = self.time_of_first_contact.tolist() if len(self.time_of_first_contact) else [np.nan] * len(self.touching)
+        return [((a, b), 1.0 if np.isnan(t) else float(t))
+                for (a, b), hit, t in zip(self.pairs.tolist(), self.touching.tolist(), times) if hit]
+
     def pair(self, i: int) -> PairResult:
         """The result of pair i alone."""
         sel = self.pair_of_leaf == i

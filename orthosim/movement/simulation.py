@@ -453,38 +453,34 @@ def detection(model: MovementModel, state: StepState, moves: dict[int, Motion], 
             out.append(pair)
         return out
 
+    _cut_back(model, state, moves, P1, tested, centers, hits, tested_pairs)
     if state.detector.sweeps:
-        _cut_back(model, state, moves, P1, tested, centers, hits, tested_pairs)
         _hold_slides_within_allowance(model, state, P1)
-    else:
-        pairs = tested(moves, set())
-        tested_pairs.update(pairs)
-        if pairs:
-            res = detect_step(model.collision, P, P1, pairs, state.detector)
-            hits.extend(Hit(pair, 1.0, P1) for pair in res.touching_pairs() if pair not in touching_set)
     return Detection(P1, tuple(hits), frozenset(tested_pairs))
 
 
 def _cut_back(model: MovementModel, state: StepState, moves: dict[int, Motion], P1: dict, tested: Callable,
               centers: Mapping[int, np.ndarray], hits: list, tested_pairs: set) -> None:
-    """A sweeping detector's rounds: every mover cut back to its earliest time of first contact
-    (cutting one tooth may put it in another's way); `P1` (FDI -> end pose) is cut in place, new
-    contacts appended to `hits`, the pairs asked added to `tested_pairs`."""
-    s, P, queries = model.settings, state.poses, state.queries
+    """The one cut-back loop of every detector: the pairs the motions may bring into contact are
+    asked, and each tooth at fault in a new contact stops at the time the detector found it: a
+    sweeping detector's time of first contact (the tooth cut back to it, in rounds: cutting one
+    tooth may put it in another's way), or the step's end for a detector that tests end poses (one
+    round: the tooth stops where it was found overlapping, cutting nothing). `P1` (FDI -> end pose)
+    is cut in place, new contacts appended to `hits`, the pairs asked added to `tested_pairs`."""
+    s, P, queries, detector = model.settings, state.poses, state.queries, state.detector
     dt = float(model.case.step_days)
     touching_set = set(state.touching)
     tcut = {n: 1.0 for n in moves}
     done: set = set()
-    request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=True,
+    request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=detector.sweeps,
                                contact_tolerance_mm=s.contact_tolerance_mm, drawn_leaves=False)
-    for _ in range(s.rounds):
+    for _ in range(s.rounds if detector.sweeps else 1):
         current = {n: m for n, m in moves.items() if tcut[n] > 0}
         pairs = tested(_scaled(current, tcut), done)
         tested_pairs.update(pairs)
         if not pairs:
             break
-        res = detect_step(model.collision, P, P1, pairs, state.detector, request, queries=queries)
-        found = [(tuple(map(int, pr)), float(t)) for pr, t in zip(res.pairs, res.time_of_first_contact) if not np.isnan(t)]
+        found = detect_step(model.collision, P, P1, pairs, detector, request, queries=queries).first_contacts()
         if not found:
             break
         for pair, t in found:
@@ -493,13 +489,13 @@ def _cut_back(model: MovementModel, state: StepState, moves: dict[int, Motion], 
                 continue  # a contact held from the last step stops the tooth; it is no new collision
             P_at = dict(P1)
             for n in pair:
-                if n in tcut:
+                if n in tcut and t < 1.0:
                     P_at[n] = interpolate_pose(P[n], P1[n], t)
             hits.append(Hit(pair, t * _frac(tcut, pair), P_at))
         cut: dict[int, float] = {}
         scaled = _scaled(moves, tcut)
         for pair, t in found:
-            for n in _at_fault(model, pair, scaled, dt, centers):
+            for n in (_at_fault(model, pair, scaled, dt, centers) if t < 1.0 else ()):
                 if n in tcut:
                     cut[n] = min(cut.get(n, 1.0), t)
         for n, t in cut.items():

@@ -15,7 +15,7 @@ and draw the same thing.
 from __future__ import annotations
 
 import time
-from contextlib import ExitStack
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from typing import Iterator, Protocol
 
@@ -115,3 +115,29 @@ def choose_strategy(in_process: bool, dentition=None) -> RunStrategy:
     from orthosim.runtime.background import fork_is_safe
 
     return ForkedChild() if fork_is_safe() else SpawnedChild(dentition)
+
+
+class _Unlogged:
+    """A run log that keeps nothing (`orthosim.runtime.run.RunLog`'s `phase`), for runs nobody reads the phases of."""
+
+    def phase(self, name: str, seconds: float, detail: str = "") -> None:
+        pass
+
+
+@contextmanager
+def step_records(case, detector: str, steps: int | None = None, *, in_process: bool = False, dentition=None):
+    """The simulation side of `orthosim run` for the case's first `steps` steps (None: all), as one
+    `SimulationSource` whose `records` are the `StepRecord`s alone: the strategy `choose_strategy`
+    picks, its run-folder files streamed into a temporary folder as a run's are. For those that
+    draw a run without being one (the bench, the image regression helpers), so that they draw what
+    `orthosim run` would. dentition: the teeth, when this process holds them already."""
+    import dataclasses
+    import tempfile
+
+    from orthosim.movement.records import StepRecord
+
+    if steps is not None:
+        case = dataclasses.replace(case, duration_days=max(1, int(steps)) * case.step_days)
+    with tempfile.TemporaryDirectory(prefix="orthosim-records-") as out, ExitStack() as stack:
+        source = choose_strategy(in_process, dentition).start(case, detector, out, _Unlogged(), stack)
+        yield SimulationSource(source.dentition, (r for r in source.records if isinstance(r, StepRecord)), source.where)
