@@ -22,6 +22,11 @@ if not os.environ.get(ENV) and not os.environ.get("PYOPENGL_PLATFORM") and probe
     os.environ[ENV] = "osmesa"
 
 _REAL_DATA = shared_data_dir() / OPEN_FULL_JAW
+# The fast tier (`-m "not slow"`) is what a developer runs between edits: a test that takes longer
+# than this (set-up and call, on a quiet two-core machine) is marked `slow`; the summary names the
+# fast tier's tests that went over it in this session
+FAST_TEST_BUDGET_S = 2.0
+_fast_seconds: dict[str, float] = {}
 _outcomes: dict[str, str] = {}
 _damaged_entries: dict[str, int] = {}  # kind of cache entry -> damaged copies a test loaded (tests/test_damaged_entries.py)
 
@@ -36,6 +41,13 @@ def damage_tally(request) -> dict[str, int]:
     request.node.user_properties.append(("damaged_entries", dict(tally)))
 
 
+def pytest_collection_modifyitems(items):
+    """The long tests (marked slow) first, the rest after them in their own order: on pytest-xdist's
+    workers the long ones then start at once and the short ones fill in around them, instead of one
+    worker finishing a long test alone at the end of the session."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 def pytest_runtest_setup(item):
     if item.get_closest_marker("real_data") and not _REAL_DATA.is_dir():
         pytest.skip(f"real-tooth data not found at {_REAL_DATA} (set ORTHOSIM_SHARED_DATA or put shared/ beside the repository)")
@@ -44,6 +56,8 @@ def pytest_runtest_setup(item):
 def pytest_runtest_logreport(report):
     """Counted from the reports (in the one process, or in pytest-xdist's controller, which receives
     every worker's reports with their markers among the keywords)."""
+    if report.when in ("setup", "call") and "slow" not in report.keywords:
+        _fast_seconds[report.nodeid] = _fast_seconds.get(report.nodeid, 0.0) + report.duration
     if report.when == "teardown":
         for name, tally in report.user_properties:
             if name == "damaged_entries":
@@ -60,6 +74,10 @@ def pytest_terminal_summary(terminalreporter):
     ran = sum(v != "skipped" for v in _outcomes.values())
     skipped = sum(v == "skipped" for v in _outcomes.values())
     terminalreporter.write_line(f"real-data tests ({_REAL_DATA}): {ran} ran, {skipped} skipped")
+    over = sorted((s, n) for n, s in _fast_seconds.items() if s > FAST_TEST_BUDGET_S)
+    if over:
+        terminalreporter.write_line(f"fast-tier tests over the {FAST_TEST_BUDGET_S:.0f} s budget (mark them slow, or make "
+                                    f"them faster): " + ", ".join(f"{n} {s:.1f} s" for s, n in reversed(over)))
     if _damaged_entries:
         tried = ", ".join(f"{kind} {n}" for kind, n in sorted(_damaged_entries.items()))
         terminalreporter.write_line(f"damaged cache entries tried: {sum(_damaged_entries.values())} ({tried})")

@@ -41,6 +41,7 @@ def test_items_arrive_in_order_and_the_child_is_reaped_at_the_end():
     assert _gone(pid)
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.parametrize("dentition_sent", [True, False], ids=["dentition sent, as orthosim run", "built in the child"])
 def test_a_child_simulation_yields_the_same_records_as_the_simulation_in_this_process(dentition_sent):
     case = load_case(DEFAULT_CASE)  # the paper's case 1, whose teeth move and collide
@@ -181,6 +182,7 @@ def test_remembered_exact_distances_are_fcls_own_answers():
     assert queries.queries == 3  # each distinct query asked of FCL once
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.skipif(sys.platform != "linux", reason="reads /proc to find the run's child processes")
 def test_ctrl_c_during_a_rendered_run_stops_it_in_one_line_and_leaves_no_process(tmp_path):
     env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa"}

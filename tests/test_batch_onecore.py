@@ -48,6 +48,7 @@ def decoded_video(path: Path) -> list[bytes]:
     return [bytes(frame) for frame in reader]
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_a_one_core_run_starts_no_thread_runs_ffmpeg_on_one_and_writes_what_orthosim_run_writes(case_file, tmp_path,
                                                                                                  monkeypatch):
     import imageio_ffmpeg

@@ -62,6 +62,7 @@ def local_batch(case_file, tmp_path_factory):
     return out, vs, rows
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_every_run_writes_a_finished_run_folder_and_a_row(local_batch):
     out, vs, rows = local_batch
     assert [r.status for r in rows] == ["ok"] * 3
@@ -122,6 +123,7 @@ def test_a_second_invocation_reuses_finished_runs_and_runs_nothing(local_batch):
     assert before == {v.run_id: (out / v.run_id / "run.json").stat().st_mtime_ns for v in vs}
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_failing_runs_are_recorded_and_the_batch_goes_on(case_file, tmp_path):
     vs = variants(case_file, "loads.0.force_cN=100,150,200")
     crashing = vs[0].run_id
@@ -141,6 +143,7 @@ def test_failing_runs_are_recorded_and_the_batch_goes_on(case_file, tmp_path):
     assert [r.reused for r in rows.values()] == [False, True, True]
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_a_hanging_run_is_stopped_at_the_run_timeout_and_the_others_finish(case_file, tmp_path):
     # the other runs end at once (the batch's own machinery is under test), so a short limit is
     # ample for them even on a loaded machine, and the test waits seconds, not minutes
@@ -154,6 +157,7 @@ def test_a_hanging_run_is_stopped_at_the_run_timeout_and_the_others_finish(case_
     assert (table["runs_ok"], table["runs_failed"]) == (3, 1)
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_a_killed_worker_costs_its_run_one_retry_or_is_recorded(case_file, tmp_path):
     vs = variants(case_file, "loads.0.force_cN=100,150")
     opts = {**H.RENDER, "fail_runs": [vs[0].run_id], "marker": str(tmp_path / "markers")}
@@ -166,6 +170,7 @@ def test_a_killed_worker_costs_its_run_one_retry_or_is_recorded(case_file, tmp_p
     assert rows[1].status == "ok"
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_the_command_exits_1_when_a_run_fails_and_0_when_all_succeed(case_file, tmp_path):
     args = [sys.executable, "-c", "from orthosim.cli import entry; entry()", "batch", str(case_file), "--out",
             str(tmp_path), "--size", "48x32", "--frames-per-step", "1", "--workers", "1"]
@@ -181,6 +186,7 @@ def test_the_command_exits_1_when_a_run_fails_and_0_when_all_succeed(case_file, 
     assert options["single_core"] and options["simulate_in_process"]  # the command asks each run for one core
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_a_batch_killed_mid_run_resumes_without_redoing_finished_runs(case_file, tmp_path):
     out = tmp_path / "out"
     args = [sys.executable, "-c", "from orthosim.cli import entry; entry()", "batch", str(case_file), "--out", str(out),
@@ -208,6 +214,7 @@ def test_a_batch_killed_mid_run_resumes_without_redoing_finished_runs(case_file,
     assert leftovers(out) == []
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_a_dask_cluster_gives_the_local_pools_results_and_survives_a_killed_worker(local_batch, tmp_path):
     distributed = pytest.importorskip("distributed")
     ref_out, vs, ref_rows = local_batch
@@ -240,6 +247,7 @@ def _build_tree(args):
     return [c.tolist() for c in tree.centers], [r.tolist() for r in tree.radii]
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_two_processes_building_the_same_tree_at_once_leave_one_whole_cache_entry(tmp_path):
     import trimesh
 

@@ -18,6 +18,7 @@ def test_help_lists_every_command_with_one_line():
         assert len(line.split(None, 1)[1]) > 10 and not line.endswith("...")  # a real one-line summary
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_run_without_render_writes_metrics_of_the_initial_model(tmp_path):
     r = orthosim("run", "cases/case1_first_premolar_extraction.toml", "--out", str(tmp_path / "o"), "--no-render")
     assert r.returncode == 0, r.stderr

@@ -114,6 +114,7 @@ def test_first_contact_only_agrees_with_all_leaf_pairs_on_which_teeth_touch(para
 
 # --- the continuous sphere-tree detector ----------------------------------------------------------
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.parametrize("builder", BUILDERS)
 def test_continuous_sphere_trees_never_miss_a_contact_that_dense_exact_sampling_finds(parametric, builder):
     roots = (thin_root_mesh(12.0, 0.35),)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import trimesh
 
 from orthosim.collision.contact_area import (ContactSurface, faces_in_spheres, faces_touching_any,
@@ -19,6 +20,7 @@ def _sampled_distance(a: np.ndarray, b: np.ndarray, n: int = 60) -> float:
     return float(np.min(np.linalg.norm(pa[:, None] - pb[None], axis=2)))
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_triangle_distance_is_exact_for_random_pairs_and_zero_for_crossing_ones():
     rng = np.random.default_rng(0)
     a = rng.normal(size=(40, 3, 3))
@@ -45,6 +47,7 @@ def _ball(x: float) -> trimesh.Trimesh:
     return m
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_exact_contact_faces_are_the_triangles_at_the_touch_point_only():
     # two balls 0.02 mm apart: the touching triangles sit around the gap; the leaf spheres that
     # overlap hold far more surface than that

@@ -132,6 +132,7 @@ def _load_quietly(kind: EntryKind, folder: Path, i: int):
         return kind.load(folder, i)
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.parametrize("kind", KINDS, ids=[k.name for k in KINDS])
 def test_any_damage_to_a_cache_entry_gives_the_clean_result_with_at_most_one_warning(tmp_path, kind, damage_tally):
     """Truncated at any byte, any bit flipped, an array filled with NaN or inf, two entries' files
@@ -165,6 +166,7 @@ def test_any_damage_to_a_cache_entry_gives_the_clean_result_with_at_most_one_war
     assert silent <= TRIALS_PER_DAMAGE // 2, f"{silent} damaged entries loaded without a warning"
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_a_nan_filled_dentition_entry_is_named_in_one_warning_rebuilt_and_the_run_is_the_clean_one(tmp_path):
     """The issue's report, through `orthosim run`: every float array of the cached dentition filled
     with NaN; the run warns once, naming the entry, and writes the clean run's metrics byte for byte."""

@@ -155,6 +155,7 @@ def test_a_damaged_evidence_table_names_the_file_and_the_row(tmp_path):
         load_evidence(bad)
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_the_evidence_page_opens_in_headless_chromium_with_a_plot_per_row(tmp_path):
     from PIL import Image
 

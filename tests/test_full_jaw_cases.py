@@ -43,6 +43,7 @@ SLIDE_ONLY_MOLARS_MM = {
 }
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.real_data
 def test_real_case1_first_molars_and_second_premolars_move_into_the_space_canines_and_incisors_stay():
     model, m, _ = _run("open_full_jaw_case1_first_premolar_extraction.toml")
@@ -55,6 +56,7 @@ def test_real_case1_first_molars_and_second_premolars_move_into_the_space_canine
         assert _moved(m, (n,))[n] >= before - 0.01, (n, _moved(m, (n,))[n], before)
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.real_data
 def test_real_case2_first_molars_and_first_premolars_move_canines_and_lateral_incisors_stay():
     model, m, _ = _run("open_full_jaw_case2_second_premolar_extraction.toml")
@@ -67,6 +69,7 @@ def test_real_case2_first_molars_and_first_premolars_move_canines_and_lateral_in
         assert _moved(m, (n,))[n] >= before - 0.01, (n, _moved(m, (n,))[n], before)
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.real_data
 def test_real_case3_the_opened_diastema_closes_in_both_arches():
     model, m, last = _run("open_full_jaw_case3_diastema.toml")

@@ -32,6 +32,7 @@ def _raw(fdi: int) -> trimesh.Trimesh:
     return trimesh.load(folder / f"tooth_{universal}.stl", force="mesh")
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.real_data
 def test_both_arches_load_as_one_model_and_every_upper_lower_distance_is_kept_to_1e_6_mm():
     dent, _ = full_jaw()
@@ -176,6 +177,7 @@ def test_scan_interpenetration_is_measured_per_pair_at_load_and_reported_in_one_
     assert hit == set(depths)
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.real_data
 def test_the_meshes_kind_maps_folders_of_one_scan_by_one_transform_too():
     files = {f"maxilla/tooth_{u}.stl": F.universal_to_fdi(u) for u in (3, 8, 9, 14)}

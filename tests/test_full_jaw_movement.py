@@ -59,6 +59,7 @@ def test_an_upper_incisor_retracted_sideways_into_the_lower_incisors_stops_just_
     assert not records[-1].moving or 21 not in records[-1].moving  # it no longer moves at the end
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.real_data
 def test_cusps_in_contact_at_rest_slide_along_each_other_instead_of_stopping_every_horizontal_move():
     # 16 overlaps 46 by 0.19 mm in the scan; moved mesially it slides over the lower molar's cusps
@@ -79,6 +80,7 @@ def test_the_scans_own_bite_slides_by_its_deepest_rest_overlap_when_the_case_set
     assert model.settings.occlusal_slide_mm == pytest.approx(0.301, abs=0.002)  # 26-37 overlap in the scan
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.real_data
 def test_an_upper_molar_extruded_into_the_lower_molar_it_bites_on_is_stopped():
     load = (Load((16,), 150.0, "occlusal", movement="extrusion"),)

@@ -17,6 +17,7 @@ def _contacts():
     return occlusal_contacts(full_jaw()[0])
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.real_data
 def test_the_occlusal_measures_of_the_parametric_model_come_out_on_the_real_bite():
     dent, _ = full_jaw()

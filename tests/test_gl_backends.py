@@ -79,6 +79,7 @@ def _has_egl(tmp_path) -> bool:
     return any(label.startswith("egl/") for label in _backends_here(tmp_path))
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_with_osmesa_hidden_a_case_renders_through_egl(tmp_path):
     if not _has_egl(tmp_path):
         pytest.skip("no EGL device can create a context on this machine")
@@ -124,6 +125,7 @@ def test_an_unknown_orthosim_gl_is_one_line_naming_the_choices(tmp_path):
     assert "auto, egl, osmesa" in done.stderr and not (tmp_path / "demo").exists()
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_auto_prefers_egl_and_each_backend_is_what_draws(tmp_path):
     labels = _backends_here(tmp_path)
     if not labels:
@@ -234,6 +236,7 @@ _TWO_RENDERERS = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_closing_one_renderer_leaves_the_others_of_the_process_drawing(tmp_path):
     """EGL has one display per device and process: closing a renderer must not terminate it under the others."""
     labels = _backends_here(tmp_path)

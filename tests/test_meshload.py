@@ -39,6 +39,7 @@ def jaw():
     return dentition, raw, [str(w.message) for w in caught]
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.real_data
 def test_real_teeth_all_load_without_repairs(jaw):
     dentition, _, messages = jaw
@@ -420,6 +421,7 @@ def _load_counting_messages(path, **kw):
     return mesh, [w for w in caught if issubclass(w.category, MeshSimplifiedWarning)]
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_a_mesh_above_the_budget_is_simplified_to_it_with_one_message_and_keeps_its_shape(tmp_path):
     _, dense = _molar(2)
     assert len(dense.faces) > 100_000 and dense.is_watertight

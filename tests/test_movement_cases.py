@@ -47,6 +47,7 @@ def _moved(metrics, teeth):
     return {n: metrics["teeth"][str(n)]["moved_mm"] for n in teeth}
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.parametrize("det", DETECTORS)
 def test_case1_first_molars_and_second_premolars_move_into_the_space_canines_and_incisors_stay(case1, det):
     m, _ = case1[1][det]

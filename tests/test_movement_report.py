@@ -102,6 +102,7 @@ def test_loaded_teeth_report_their_centre_of_resistance_and_movement(run):
     assert np.allclose(t16["center_of_resistance_local_mm"], model.mechanics[16].center_of_resistance)
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_memory_stays_flat_in_the_number_of_steps_as_per_step_detail_streams_to_disk(run, tmp_path):
     import tracemalloc
 

@@ -13,6 +13,7 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from orthosim_render.imgdiff import read_png, read_sidecar, sidecar_path
 
@@ -42,6 +43,7 @@ def test_the_plugin_is_registered_for_every_pytest_run():
     assert ep.value == "orthosim_render.pytest_plugin"
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_it_works_beside_a_plugin_with_pytest_regressions_names(tmp_path):
     """pytest-regressions defines `image_regression`, `--force-regen` and `--regen-all`: both load, both fixtures work."""
     (tmp_path / "regressions_like.py").write_text(textwrap.dedent("""
@@ -82,6 +84,7 @@ def test_plate(orthosim_image_regression, tmp_path):
 """
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_golden_workflow_new_pass_fail_with_diff_then_regenerate(tmp_path):
     project = tmp_path / "project"
     project.mkdir()
@@ -115,6 +118,7 @@ def test_golden_workflow_new_pass_fail_with_diff_then_regenerate(tmp_path):
     assert read_png(golden)[20, 30, 0] == 90 and sidecar_path(golden).is_file()
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_readme_example_test_runs_as_written(tmp_path):
     """The README's three-line regression test: the first run writes the golden, the second passes."""
     text = (ROOT / "README.md").read_text()

@@ -70,6 +70,7 @@ def session_with_two_failures(tmp_path_factory):
     return project, results, run
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_the_session_writes_a_summary_of_exactly_the_two_failures(session_with_two_failures):
     project, results, run = session_with_two_failures
     assert "2 failed, 2 passed" in run.stdout, run.stdout + run.stderr
@@ -118,6 +119,7 @@ def test_results_pointing_at_a_file_is_refused_in_one_line(tmp_path):
     assert r.returncode == 4 and "--orthosim-results" in r.stderr and "is a file" in r.stderr
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_a_session_on_several_pytest_xdist_workers_writes_one_page_of_every_workers_failures(session_with_two_failures):
     """CI jobs run their tests on every core: each worker hands its checks to the controller, which
     writes the one page (no worker's page overwrites another's, no part file is left behind)."""

@@ -7,10 +7,13 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from cli_helpers import ROOT
 from test_run_lifecycle import quick_case
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_a_drawn_run_with_empty_caches_builds_its_trees_in_the_child_and_finishes(tmp_path):
     env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa", "ORTHOSIM_CACHE": str(tmp_path / "empty-cache")}
     out = tmp_path / "o"

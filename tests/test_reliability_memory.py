@@ -49,6 +49,7 @@ _FORKED = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.skipif(sys.platform != "linux", reason="/proc")
 def test_pages_a_forked_child_shares_with_its_parent_count_once_in_the_headline_and_twice_in_summed_rss():
     peak = measure_peak_memory([sys.executable, "-c", _FORKED], interval_s=0.05, unique_interval_s=0.2)

@@ -80,6 +80,7 @@ def test_tile_places_views_left_to_right():
     assert t.shape == (2, 6, 3) and t[0, 0, 0] == 0 and t[0, 5, 0] == 9
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_bench_record_follows_the_output_contract(tmp_path, dentition):
     record = run_bench(dentition=dentition, frames=6, warmup=2, memory_frames=4, variant_rounds=1,
                        size=(160, 120), n_markers=100, tree_build=False, staging=False)
@@ -143,6 +144,7 @@ def test_a_failed_run_leaves_no_partial_video(tmp_path, dentition):
     assert not [p for p in tmp_path.rglob(".*")]  # no temporary files either
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_render_run_reports_each_frame_to_its_caller_and_the_bench_times_render_run(tmp_path, dentition, monkeypatch):
     motion = SyntheticMotion(dentition, n_markers=30)
     states = [motion(i) for i in range(4)]

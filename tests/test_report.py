@@ -90,6 +90,7 @@ def report(report_dir):
     return json.loads((report_dir / "report.json").read_text())
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_report_json_figures_equal_the_metrics_of_the_runs(report):
     assert [c["name"] for c in report["cases"]] == ["small extraction case", "small diastema case"]
     for case in report["cases"]:
@@ -160,6 +161,7 @@ def test_the_pdf_has_one_section_per_case(report_dir, report):
         assert "Occlusal contact areas" in texts[start] and "Throughput" in "".join(texts[start:])
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_report_refuses_an_unfinished_run_one_from_another_version_and_a_damaged_one(report_dir, report, tmp_path):
     run = Path(report["cases"][0]["runs"]["continuous"]["run_dir"])
     unfinished = tmp_path / "unfinished"
@@ -183,6 +185,7 @@ def test_report_refuses_an_unfinished_run_one_from_another_version_and_a_damaged
     assert not any((tmp_path / d / "index.html").exists() for d in ("r1", "r2", "r3"))
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_report_from_runs_gives_the_same_figures(report_dir, report, tmp_path):
     runs = [c["runs"][d]["run_dir"] for c in report["cases"] for d in DETECTORS]
     r = orthosim("report", "--from-runs", *runs, "--out", str(tmp_path / "again"), "--size", "320x240")

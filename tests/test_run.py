@@ -160,6 +160,7 @@ def test_the_default_animation_lasts_at_least_five_seconds():
     assert frames_per_step(RunOptions(frames_per_step=3), 9) == 3
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_a_drawn_run_has_the_asked_length_split_views_and_a_full_size_gif(short_case, tmp_path):
     import imageio_ffmpeg
     from PIL import Image
@@ -185,6 +186,7 @@ def test_a_drawn_run_has_the_asked_length_split_views_and_a_full_size_gif(short_
     assert len(r.stdout.strip().splitlines()) == 1 and r.stderr == ""
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_collide_step_queries_a_case_at_a_simulation_step():
     before = orthosim("collide", "step", "cases/case3_incisor_space_closure.toml", "--step", "0")
     after = orthosim("collide", "step", "cases/case3_incisor_space_closure.toml", "--step", "9")

@@ -135,6 +135,7 @@ def test_sigterm_mid_run_stops_cleanly_with_143_and_leaves_the_earlier_run_whole
     assert not any(map(_alive, helpers))
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @linux_only
 def test_after_sigkill_of_the_run_its_helper_processes_exit_by_themselves(tmp_path):
     out = tmp_path / "o"

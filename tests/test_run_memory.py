@@ -71,6 +71,7 @@ def test_a_step_record_unpickles_without_the_simulations_imports():
     assert SimulationStepRecord is StepRecord
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the drawn run forks its simulation child on Linux")
 def test_the_drawing_process_of_a_drawn_run_never_imports_numba(tmp_path):
     # the main process (it draws) reports its imports at exit; the forked child ends with os._exit

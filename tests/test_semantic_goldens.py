@@ -177,6 +177,7 @@ def moved_13(dentition):
     return golden, candidate
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_tolerances_by_label_pass_only_the_change_they_name(moved_13):
     (g, gl), (c, cl) = moved_13
 
@@ -211,6 +212,7 @@ def write_pair(folder: Path, golden, candidate, with_labels=(True, True)) -> tup
     return gp, cp
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_imgdiff_prints_what_changed_when_both_images_carry_labels(tmp_path, moved_13):
     golden, candidate = write_pair(tmp_path, *moved_13)
     r = orthosim("imgdiff", str(golden), str(candidate))
@@ -295,6 +297,7 @@ def test_update_carries_the_candidates_labels_to_the_golden(tmp_path, moved_13):
     assert not any(p.exists() for p in labels_paths(golden))
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.real_data
 def test_on_real_teeth_a_moved_canine_and_a_removed_incisor_are_named_exactly():
     """The patient's CBCT-segmented teeth (about 890,000 triangles, 31 teeth): the same claims as on

@@ -97,6 +97,7 @@ def test_other_branching_factors_keep_coverage():
     assert_conservative(tree, mesh, n_surface=100_000)
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.real_data
 def test_real_molar_is_covered_by_its_leaves():
     mesh = trimesh.load(REAL_MOLAR)

@@ -82,6 +82,7 @@ def test_a_damaged_entry_is_reported_in_one_warning_and_rebuilt(tmp_path, kind):
         cached_sphere_tree(mesh, cache_dir=tmp_path)
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_a_run_with_a_damaged_cache_warns_once_and_matches_a_clean_run(tmp_path):
     """Through `orthosim run`: an empty entry is no abort, a non-finite one no silent wrong answer."""
     from test_run_lifecycle import quick_case, run
@@ -104,6 +105,7 @@ def test_a_run_with_a_damaged_cache_warns_once_and_matches_a_clean_run(tmp_path)
     assert damaged.stdout.split(" -> ")[0] == clean.stdout.split(" -> ")[0]  # same collisions, same penetration
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_two_processes_writing_and_reading_one_entry_never_see_a_partial_file(tmp_path):
     mesh = _mesh()
     tree = build_sphere_tree(mesh)

@@ -51,6 +51,7 @@ def test_trees_are_named_by_fdi_only_when_the_numbering_is_known(tmp_path, mesh_
     assert sorted(p.name for p in out.iterdir()) == names
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_eval_json_has_the_contract_fields(tmp_path, mesh_folder):
     out = tmp_path / "eval.json"
     res = CliRunner().invoke(spheretree, ["eval", str(mesh_folder), "--method", "fit", "--depth", "3",
@@ -71,6 +72,7 @@ def test_eval_json_has_the_contract_fields(tmp_path, mesh_folder):
     assert 0 < s["sov_sum_mean_mc_stderr"] < max(t["sov_sum_stderr"] for t in data["teeth"])
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_eval_takes_both_arches_of_an_open_full_jaw_patient_named_by_universal_number(tmp_path):
     # Open-Full-Jaw names files by Universal number: tooth_3 is the upper right first molar, FDI 16,
     # and tooth_19 the lower left one, FDI 36 (not FDI 19, which does not exist)

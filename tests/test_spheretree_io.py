@@ -200,6 +200,7 @@ def test_many_trees_at_once_build_in_parallel_each_distinct_mesh_once(tmp_path):
         _same(a, b)
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_tree_build_timings_build_each_mirror_pair_once():
     from orthosim.model.parametric import parametric_dentition
     from orthosim_bench.spheretree import tree_build_timings

@@ -155,6 +155,7 @@ def test_shipped_staging_cases_validate():
         assert case.staging is not None and case.staging.target is not None
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_target_meshes_register_to_the_start_and_bad_ones_are_refused(tmp_path, dent):
     moved = target_pose(dent.teeth[41], dent.teeth[41].rest_pose, ToothMovement(buccal_mm=0.5, rotation_deg=5))
     (tmp_path / "final").mkdir()
@@ -217,6 +218,7 @@ def test_the_bench_setup_moves_all_28_teeth_with_a_lower_bound_of_30(dent):
     assert len(dent.fdis) == 28 and np.all(counts > 0) and counts.max() == 30
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_stage_command_writes_the_chart_the_poses_and_the_summary(tmp_path):
     import csv
     import json

@@ -23,6 +23,9 @@ CROWDING = CASES_DIR / "staging_lower_incisor_crowding.toml"
 DIASTEMA = CASES_DIR / "staging_midline_diastema.toml"
 SHIPPED = sorted(CASES_DIR.glob("staging_*.toml"))
 
+# the module's stagings are made once, on one pytest-xdist worker (`--dist loadgroup`)
+pytestmark = pytest.mark.xdist_group("staging_outputs")
+
 
 @pytest.fixture(scope="module")
 def crowding(tmp_path_factory):
@@ -50,6 +53,7 @@ def _stages(folder):
     return json.loads((folder / "stages.json").read_text())
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_stage_models_hold_one_closed_body_per_tooth_in_mm_where_the_plan_puts_it(crowding, dent):
     stages = _stages(crowding)
     last = stages["stages"]
@@ -89,6 +93,7 @@ def test_the_certificate_lists_every_tooth_against_its_limit_and_the_ipr_pair_at
     assert all(not t["ipr"] for t in cert["transitions"][1:])
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_certified_clearances_bracket_densely_sampled_exact_distances(crowding, dent):
     """The reported least clearance is no lower than the truth by more than the tolerance, and
     never above what 401 FCL distances along the same motion find."""
@@ -120,10 +125,13 @@ def test_certified_clearances_bracket_densely_sampled_exact_distances(crowding, 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("case", SHIPPED, ids=lambda p: p.stem)
-def test_each_shipped_staging_case_exports_models_charts_and_a_certificate_that_verify_accepts(tmp_path, case):
-    out = tmp_path / "out"
-    r = orthosim("stage", case, "--out", out, "--no-render", "--export", "stl")
-    assert r.returncode == 0, r.stderr
+def test_each_shipped_staging_case_exports_models_charts_and_a_certificate_that_verify_accepts(tmp_path, case, request):
+    if case == CROWDING:  # the module's staging of it, made with the same exports (and pictures)
+        out = request.getfixturevalue("crowding")
+    else:
+        out = tmp_path / "out"
+        r = orthosim("stage", case, "--out", out, "--no-render", "--export", "stl")
+        assert r.returncode == 0, r.stderr
     n = _stages(out)["stages"]
     assert len(list((out / "models").glob("stage_*_*.stl"))) == 2 * (n + 1)
     assert (out / "charts" / "staging_chart.png").stat().st_size > 10_000
@@ -148,6 +156,7 @@ def _moved(dent, data, stage, fdi, **movement):
     data["poses"][stage]["poses"][str(fdi)] = target_pose(dent.teeth[fdi], pose, ToothMovement(**movement)).tolist()
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_verify_accepts_the_written_staging_and_catches_an_added_collision_and_limit_overrun(diastema, dent, tmp_path):
     ok = orthosim("stage", "verify", diastema)
     assert ok.returncode == 0, ok.stdout + ok.stderr
@@ -236,6 +245,7 @@ def test_verify_refuses_a_damaged_folder_in_one_line(diastema, tmp_path, damage,
     assert message in r.stderr and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_verify_refuses_a_staging_whose_case_changed(diastema, tmp_path):
     case = tmp_path / "case.toml"
     case.write_text(DIASTEMA.read_text().replace("mesial_mm = 1.0", "mesial_mm = 0.9", 1))
@@ -252,6 +262,7 @@ def test_a_pose_that_is_not_a_rigid_motion_is_refused(diastema, tmp_path):
     assert r.returncode == 2 and "poses[1].poses.11: is not a rigid motion" in r.stderr
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_the_staging_page_loads_offline_in_chromium_with_its_charts_and_pictures(crowding):
     from orthosim_render.report.browser import NAMES, load_page
 
@@ -331,6 +342,7 @@ def test_glb_and_ply_stage_models_hold_the_same_teeth_as_the_plan(diastema, dent
     assert len(ply.split(only_watertight=True)) == 14
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_verify_refuses_an_inflated_reduction_that_would_hide_a_contact(crowding, tmp_path):
     def edit(data):
         data["ipr"][0]["ipr_mm"] = 2.0  # 41/42 overlap by about 0.58 mm at the target

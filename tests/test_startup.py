@@ -53,6 +53,7 @@ def test_help_and_refused_options_answer_before_any_heavy_import(tmp_path, args,
         assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 @pytest.mark.skipif(sys.platform != "linux", reason="reads /proc to see the child's command line")
 def test_a_drawn_run_simulates_in_a_forked_child_that_neither_imports_nor_loads_the_teeth_again(tmp_path):
     # the child of `orthosim run` is a copy of the drawing process made after the imports both sides

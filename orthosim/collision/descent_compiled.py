@@ -72,8 +72,13 @@ if AVAILABLE:
 
     @njit(cache=True, nogil=True)
     def _grow(buf, m):
+        """The result buffer at twice its size, its first m rows kept. Copied element by element: a
+        slice assignment would compile numba's shape-mismatch error path (string formatting), seconds
+        of a cold start for a copy that cannot mismatch."""
         out = np.empty((2 * buf.shape[0], 4), np.int64)
-        out[:m] = buf[:m]
+        for i in range(m):
+            for j in range(4):
+                out[i, j] = buf[i, j]
         return out
 
     @njit(cache=True, nogil=True)
