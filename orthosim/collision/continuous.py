@@ -137,7 +137,8 @@ def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, 
     meshes' first contact (up to FCL's own accuracy), within `tolerance` mm of travel of it
     whenever it returns before `max_iterations`; None when conservative advancement proves the
     meshes stay apart until t = 1. Meshes that end the step within the tolerance of each other
-    count as in contact (reported conservatively), which is what a step cut back to it wants.
+    count as in contact where the speed bound cannot prove them apart (a turning tooth's bound is
+    loose): reported conservatively, which is what a step cut back to it wants.
 
     contact = INTERSECTING (the staging planner's): returns the first time in [t_start, 1] at
     which FCL finds the meshes intersecting, each stride the distance over the speed bound but

@@ -44,7 +44,8 @@ class CollisionRequest:
     contact: what the refined time of first contact means (`continuous.refine_time_of_contact`):
         WITHIN_TOLERANCE (the simulator's): no later than the meshes' first contact and within
         `contact_tolerance_mm` of travel of it; meshes that end the step within that tolerance of
-        each other count as touching. INTERSECTING (the staging planner's): the first time the
+        each other may count as touching (where the speed bound cannot prove them apart, as for
+        a turning tooth). INTERSECTING (the staging planner's): the first time the
         advancement finds the meshes intersecting, in [0, 1], its strides never shorter than
         `contact_tolerance_mm` of closing (a contact shallower than that can slip between two
         strides: the query's resolution); meshes that end the step just apart do not touch.
