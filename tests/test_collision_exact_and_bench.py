@@ -52,3 +52,21 @@ def test_the_generic_broad_phase_keeps_bodies_that_meet_only_during_the_step():
     model = box_model([10, 0, 0])
     res = detect_step(model, {2: translation([10, 0, 0])}, {2: translation([-10, 0, 0])}, detector="continuous")
     assert [tuple(p) for p in res.pairs] == [(1, 2)] and res.touching[0]
+
+
+def test_the_swept_sphere_broad_phase_pairs_any_two_teeth_that_may_meet_during_the_motion():
+    """Staging's broad phase: teeth of either arch, anywhere along it, whose sweeps may meet."""
+    from orthosim.collision import swept_sphere_pairs
+
+    a = trimesh.creation.box(extents=[2, 2, 2])
+    b = trimesh.creation.box(extents=[2, 2, 2])
+    model = CollisionModel([Body(11, a, median_split_tree(a), np.eye(4)),
+                            Body(36, b, median_split_tree(b), translation([10, 0, 0]))])
+    at_rest = model.pose_array({})
+    closer = model.pose_array({36: translation([2.5, 0, 0])})  # 36 moves to 0.5 mm from 11
+    assert default_pairs(model, at_rest, poses_end=closer) == []  # FDI teeth: neighbours and facing teeth only
+    assert swept_sphere_pairs(model, at_rest, closer) == [(11, 36)]
+    assert swept_sphere_pairs(model, at_rest, at_rest) == []
+    assert swept_sphere_pairs(model, at_rest, at_rest, margin_mm=4.0) == [(11, 36)]  # root spheres 6.5 mm apart
+    assert swept_sphere_pairs(model, closer, closer) == [(11, 36)]
+    assert swept_sphere_pairs(model, closer, closer, moving_only=True) == []  # nothing moves: nothing new can meet

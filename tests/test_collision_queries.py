@@ -166,6 +166,20 @@ def test_a_runs_answers_equal_fcl_on_the_whole_meshes_to_the_last_bit():
     assert 0 < len(patch.faces_i) < len(model.bodies[0].mesh.faces) / 4
 
 
+def test_meshes_alone_answer_as_their_collision_model_does_with_or_without_patches():
+    """`ExactQueries.of_meshes`: no sphere trees built, FCL's own numbers all the same."""
+    model = spheres()
+    meshes = {b.key: b.mesh for b in model.bodies}
+    alone, whole = ExactQueries.of_meshes(meshes), ExactQueries.of_meshes(meshes, patch_reach_mm=0.0)
+    np.testing.assert_array_equal(alone.model.rho_max, model.rho_max)
+    for gap in [0.3, 0.02, 0.002, -0.01, 0.6, 2.0]:
+        poses = {1: np.eye(4), 2: translation([6.0 + gap, 0.01, -0.02])}
+        d, hit = whole_mesh_answers(model, poses)
+        for q in (alone, whole):
+            assert q.distance((1, 2), poses) == d and q.intersects((1, 2), poses) == hit
+    assert alone._patches and not whole._patches
+
+
 def test_a_pair_proved_apart_by_its_last_distance_is_not_tested_with_fcl():
     model, _ = boxes(0.0)
     q = ExactQueries(model)

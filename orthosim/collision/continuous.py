@@ -9,15 +9,20 @@ spheres. The least such time of a tooth pair is never later than the meshes' own
 
 `refine_time_of_contact` then optionally advances that time on the exact meshes by conservative
 advancement: at time t with mesh distance d, no point can close the gap faster than the bound mu
-on relative speed, so [t, t + d / mu] is contact-free; it stops when an exact test finds contact
-within `tolerance` mm of travel after t.
+on relative speed, so [t, t + d / mu] is contact-free. What stops it is the caller's meaning of
+contact (`contract.CollisionRequest.contact`): the simulator's, an exact test finding contact
+within `tolerance` mm of travel after t; the staging planner's, the meshes intersecting, with
+strides never shorter than `tolerance` mm of closing.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from orthosim.collision.descent import compiled_descent, descend, sphere_overlap_test
+from orthosim.collision.contract import INTERSECTING, WITHIN_TOLERANCE
 from orthosim.collision.model import FLOAT32_MARGIN_MM, CollisionModel
 from orthosim.geometry.motion import PosePath, chord_deviation_bound, max_speed, relative_speed_bound, rotation_angle
 from orthosim.collision.queries import ExactQueries
@@ -125,15 +130,26 @@ def _earliest(pair, la, lb, t, leave, first_only):
 
 def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, T0b, T1b, t_start: float,
                            tolerance: float = 0.05, max_iterations: int = 2000,
-                           queries: ExactQueries | None = None) -> float | None:
+                           queries: ExactQueries | None = None, contact: str = WITHIN_TOLERANCE) -> float | None:
     """Advance a conservative first time of contact on the exact meshes of bodies i_a, i_b.
 
-    Returns a time in [t_start, 1) no later than the meshes' first contact (up to FCL's own
-    accuracy), within `tolerance` mm of travel of it whenever it returns before `max_iterations`;
-    None when conservative advancement proves the meshes stay apart until t = 1. `queries`: the
-    run's `ExactQueries` of this model (a refinement from t = 0 often asks what the caller asked
-    already about the step's start poses: the same answers, fewer FCL queries); one is made for
-    this call when None.
+    contact = WITHIN_TOLERANCE (the simulator's): returns a time in [t_start, 1) no later than the
+    meshes' first contact (up to FCL's own accuracy), within `tolerance` mm of travel of it
+    whenever it returns before `max_iterations`; None when conservative advancement proves the
+    meshes stay apart until t = 1. Meshes that end the step within the tolerance of each other
+    count as in contact where the speed bound cannot prove them apart (a turning tooth's bound is
+    loose): reported conservatively, which is what a step cut back to it wants.
+
+    contact = INTERSECTING (the staging planner's): returns the first time in [t_start, 1] at
+    which FCL finds the meshes intersecting, each stride the distance over the speed bound but
+    never shorter than `tolerance` mm of closing; None when none is found. Aligner stages end with
+    neighbours within hundredths of a millimetre by design: that is no contact here, and a contact
+    shallower than `tolerance` can slip between two strides (the query's resolution). The strides'
+    floor bounds the iterations, so `max_iterations` is raised to what it allows.
+
+    `queries`: the run's `ExactQueries` of this model (a refinement from t = 0 often asks what the
+    caller asked already about the step's start poses: the same answers, fewer FCL queries); one
+    is made for this call when None.
     """
     if queries is None:
         queries = ExactQueries(model, memo_size=16)
@@ -141,8 +157,6 @@ def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, 
     # travel of the teeth themselves, so teeth moving together are still stopped precisely.
     angles = rotation_angle(T0a, T1a), rotation_angle(T0b, T1b)
     mu = relative_speed_bound(T0a, T1a, model.rho_max[i_a], T0b, T1b, model.rho_max[i_b], angles)
-    travel = max_speed(T0a, T1a, model.rho_max[i_a], angles[0]) + max_speed(T0b, T1b, model.rho_max[i_b], angles[1])
-
     path_a, path_b = PosePath(T0a, T1a), PosePath(T0b, T1b)
 
     def collide_at(t) -> bool:
@@ -151,12 +165,22 @@ def refine_time_of_contact(model: CollisionModel, i_a: int, i_b: int, T0a, T1a, 
     t = float(t_start)
     if mu <= 0:
         return t if collide_at(t) else None
+    intersecting = contact == INTERSECTING
+    if intersecting:
+        max_iterations = max(max_iterations, math.ceil(mu / tolerance) + 2)
+    else:
+        travel = max_speed(T0a, T1a, model.rho_max[i_a], angles[0]) + max_speed(T0b, T1b, model.rho_max[i_b], angles[1])
     for _ in range(max_iterations):
+        if intersecting and collide_at(t):
+            return t
         if t >= 1.0:
             return None
         d = queries.body_distance(i_a, path_a.at(t), i_b, path_b.at(t))
         if d <= 0.0:
             return t
+        if intersecting:  # on to the next stride, t = 1 (the end poses) tested last
+            t = min(1.0, t + max(d, tolerance) / mu)
+            continue
         if t + d / mu >= 1.0:  # the gap cannot close within the step: no contact, by the speed bound
             return None
         if d <= tolerance:

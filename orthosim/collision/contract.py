@@ -25,6 +25,12 @@ class CollisionError(OrthosimError):
     """A collision query asks for something the model cannot answer (unknown detector, missing pose)."""
 
 
+# what a refined time of first contact means (`CollisionRequest.contact`)
+WITHIN_TOLERANCE = "within_tolerance"
+INTERSECTING = "intersecting"
+CONTACTS = (WITHIN_TOLERANCE, INTERSECTING)
+
+
 @dataclass(frozen=True)
 class CollisionRequest:
     """What a caller wants from one whole-arch query.
@@ -34,8 +40,17 @@ class CollisionRequest:
     refine_time_of_contact: continuous detector only. False returns the sphere-tree time of first
         contact (the paper's Eq. 2 at leaf spheres, conservative: never later than the meshes' own).
         True then advances it on the exact meshes (conservative advancement with exact distances,
-        see `continuous.refine_time_of_contact`) to within `contact_tolerance_mm` of travel.
-    contact_tolerance_mm: travel tolerance (mm) of the refined time of first contact.
+        see `continuous.refine_time_of_contact`) to what `contact` calls contact.
+    contact: what the refined time of first contact means (`continuous.refine_time_of_contact`):
+        WITHIN_TOLERANCE (the simulator's): no later than the meshes' first contact and within
+        `contact_tolerance_mm` of travel of it; meshes that end the step within that tolerance of
+        each other may count as touching (where the speed bound cannot prove them apart, as for
+        a turning tooth). INTERSECTING (the staging planner's): the first time the
+        advancement finds the meshes intersecting, in [0, 1], its strides never shorter than
+        `contact_tolerance_mm` of closing (a contact shallower than that can slip between two
+        strides: the query's resolution); meshes that end the step just apart do not touch.
+    contact_tolerance_mm: the refinement's tolerance (mm): of travel (WITHIN_TOLERANCE), or the
+        shortest stride (INTERSECTING).
     touch_tolerance_mm: `contacts`: the exact and continuous detectors count two meshes this close
         (mm) as touching.
     drawn_leaves: continuous detector only. False leaves the result's leaf arrays empty: for a
@@ -45,9 +60,14 @@ class CollisionRequest:
 
     all_leaf_pairs: bool = True
     refine_time_of_contact: bool = False
+    contact: str = WITHIN_TOLERANCE
     contact_tolerance_mm: float = 0.05
     touch_tolerance_mm: float = 0.05
     drawn_leaves: bool = True
+
+    def __post_init__(self):
+        if self.contact not in CONTACTS:
+            raise CollisionError(None, "contact", f"unknown meaning of contact {self.contact!r}", f"use one of {', '.join(CONTACTS)}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,8 +101,8 @@ class StepResult:
 
     pairs: (p, 2) int64 FDI numbers of the tested pairs, in the order given.
     touching: (p,) bool per pair.
-    time_of_first_contact: (p,) float64 per pair, NaN where no contact (continuous detector;
-        NaN everywhere for discrete detectors).
+    time_of_first_contact: (p,) float64 per pair, NaN where no contact (continuous detector, in
+        [0, 1), or [0, 1] when refined to INTERSECTING meshes; NaN everywhere for discrete detectors).
     pair_of_leaf: (m,) int64 index into `pairs` of each overlapping leaf pair.
     leaf_pairs, centers_a, centers_b, radii_a, radii_b: as in `PairResult`, concatenated over pairs.
     detector: which detector produced this ("circles", "discrete", "continuous", "exact").

@@ -30,20 +30,36 @@ DRAW_TOLERANCE_MM = 1e-3  # leaf centres drawn on their chords when the true pat
 
 def default_pairs(model: CollisionModel, poses: np.ndarray | None = None, absent: Sequence[int] = (),
                   poses_end: np.ndarray | None = None) -> list[tuple[int, int]]:
-    """The broad phase: arch neighbours and facing teeth when every body is an FDI tooth, else a
-    sweep and prune over the bodies' root spheres at `poses` (rest poses by default), each grown to
-    hold its whole sweep when `poses_end` is given ((n, 4, 4) arrays in body order)."""
+    """The broad phase: arch neighbours and facing teeth when every body is an FDI tooth, else
+    `swept_sphere_pairs` at `poses` (rest poses by default), over the motion to `poses_end` when
+    given ((n, 4, 4) arrays in body order)."""
     keys = model.keys
     if all(fdi_mod.is_fdi(k) for k in keys):
         return candidate_pairs(keys, absent)
     P0 = np.stack([b.rest_pose for b in model.bodies]) if poses is None else poses
-    P1 = P0 if poses_end is None else poses_end
+    return swept_sphere_pairs(model, P0, P0 if poses_end is None else poses_end)
+
+
+def swept_sphere_pairs(model: CollisionModel, poses: np.ndarray, poses_end: np.ndarray, margin_mm: float = 0.0,
+                       moving_only: bool = False) -> list[tuple[int, int]]:
+    """The broad phase for any bodies (teeth of either arch, crowns and roots, any distance apart
+    along the arch): (key a, key b) of every pair whose root spheres, each grown to hold its whole
+    sweep from `poses` to `poses_end` ((n, 4, 4) in body order) and by `margin_mm`, overlap (sweep
+    and prune). Each root sphere's centre is followed along its chord, so the sphere about the
+    chord's midpoint is grown by half the chord and by the centre's deviation from it
+    (`motion.chord_deviation_bound`). moving_only: keep only pairs of which at least one body
+    moves (a pair at rest cannot come into contact during the motion)."""
+    keys = model.keys
+    P0, P1 = poses, poses_end
     roots = model.roots(np.arange(len(keys)))
     c0 = model.xyz(model.world_centers(P0), roots)
     c1 = model.xyz(model.world_centers(P1), roots)
     r = (model.radii[roots] + 0.5 * np.linalg.norm(c1 - c0, axis=1)
          + chord_deviation_bound(rotation_angle(P0, P1), model.rho[roots]))
-    idx = sweep_and_prune(0.5 * (c0 + c1), r)
+    idx = sweep_and_prune(0.5 * (c0 + c1), r, margin_mm)
+    if moving_only and len(idx):
+        moved = np.any(np.abs(P1 - P0) > 0, axis=(1, 2))
+        idx = idx[moved[idx[:, 0]] | moved[idx[:, 1]]]
     return [(keys[i], keys[j]) for i, j in idx]
 
 
@@ -117,7 +133,7 @@ def _continuous_step(model, P0, P1, pairs_arr, pair_idx, request, queries) -> St
         for i in np.flatnonzero(~np.isnan(toc)):
             a, b = pair_idx[i]
             r = refine_time_of_contact(model, a, b, P0[a], P1[a], P0[b], P1[b], toc[i], request.contact_tolerance_mm,
-                                       queries=queries)
+                                       queries=queries, contact=request.contact)
             toc[i] = np.nan if r is None else r
     if not request.drawn_leaves:
         return StepResult("continuous", pairs_arr, ~np.isnan(toc), toc, **empty_leaves())

@@ -4,6 +4,7 @@
     queries.intersects((13, 14), poses)            # pair = FDI keys; poses = FDI -> (4, 4)
     queries.distance((13, 14), poses)              # mm between the meshes, 0.0 when they intersect
     queries.penetration((13, 14), poses)           # mm the meshes interpenetrate, 0.0 when apart
+    ExactQueries.of_meshes({13: mesh_a, 14: mesh_b})   # meshes alone, no sphere trees
 
 The `CollisionModel` never changes during a run; the FCL objects that exact queries re-pose are
 state, so they live here, one set per run (a second run, or a thread, makes its own).
@@ -43,6 +44,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
+from dataclasses import dataclass
 from typing import Iterable, Mapping
 
 import numpy as np
@@ -83,10 +85,47 @@ class _Patch:
         return self.obj_i, self.obj_j
 
 
-class ExactQueries:
-    """Exact intersection, distance and interpenetration depth between the model's meshes."""
+@dataclass(frozen=True, eq=False)
+class MeshBody:
+    """A body known by its mesh alone (local frame, mm)."""
 
-    def __init__(self, model: CollisionModel, memo_size: int = 4096, patch_reach_mm: float = PATCH_REACH_MM):
+    key: int
+    mesh: trimesh.Trimesh
+
+
+class MeshBodies:
+    """Bodies known by their meshes alone, with no sphere trees: what exact queries read of a
+    `CollisionModel` (`bodies[i].mesh`, `index`, `rho_max`), for callers that build no trees (the
+    staging certificate and its independent verifier). Body i is the i-th mesh given."""
+
+    def __init__(self, meshes: Mapping[int, trimesh.Trimesh]):
+        self.bodies = [MeshBody(int(k), m) for k, m in meshes.items()]
+        self.index = {b.key: i for i, b in enumerate(self.bodies)}
+        # mm: each body's farthest vertex from its local origin, as `CollisionModel.rho_max`
+        self.rho_max = np.array([np.linalg.norm(b.mesh.vertices, axis=1).max() for b in self.bodies])
+
+    @property
+    def keys(self) -> list[int]:
+        return [b.key for b in self.bodies]
+
+
+class ExactQueries:
+    """Exact intersection, distance and interpenetration depth between the model's meshes.
+
+    model: a `CollisionModel`, or `MeshBodies` for meshes alone (`of_meshes`; everything but
+    `world_centers`, which places sphere-tree nodes). patch_reach_mm: the patches' reach (module
+    docstring); 0 asks every question of the whole meshes, for a caller whose pairs move far
+    between questions (the staging certificate's samples across a whole stage), where patches
+    would be cut afresh for nearly every answer.
+    """
+
+    @classmethod
+    def of_meshes(cls, meshes: Mapping[int, trimesh.Trimesh], **options) -> "ExactQueries":
+        """Exact queries between meshes alone (key -> local-frame mesh, mm), no sphere trees built;
+        options as for the constructor."""
+        return cls(MeshBodies(meshes), **options)
+
+    def __init__(self, model: "CollisionModel | MeshBodies", memo_size: int = 4096, patch_reach_mm: float = PATCH_REACH_MM):
         self.model = model
         self._objects: dict[int, object] = {}
         self._memo_size = memo_size
@@ -214,7 +253,10 @@ class ExactQueries:
     def _patch(self, i: int, pose_i: np.ndarray, j: int, pose_j: np.ndarray, M: np.ndarray, build: bool) -> "_Patch | None":
         """The pair's patches with `shift` set for these poses: kept while the teeth have moved
         relative to each other by at most half the reach since they were cut, cut afresh (build)
-        otherwise; None when there are none and build is False. M: body i's pose in body j's frame."""
+        otherwise; None when there are none and build is False, or without patches (reach 0). M:
+        body i's pose in body j's frame."""
+        if self.patch_reach_mm <= 0.0:
+            return None
         N = _relative(pose_j, pose_i)
         patch = self._patches.get((i, j))
         if patch is not None:

@@ -23,7 +23,6 @@ import numpy as np
 
 from orthosim.collision.queries import ExactQueries
 from orthosim.errors import OrthosimError
-from orthosim.geometry import meshquery
 
 RESOLUTION_MM = 1e-3  # bisection resolution of the reduction
 CLEARANCE_MM = 0.01  # extra room left between the reduced surfaces, above the contact check's resolution
@@ -48,15 +47,15 @@ class InterproximalReduction:
         return -h * self.direction, h * self.direction
 
 
-def penetration_along(obj_a, pose_a: np.ndarray, obj_b, pose_b: np.ndarray, direction: np.ndarray) -> float:
-    """mm: least translation of b along `direction` (unit, arch frame) after which the placed FCL
-    objects no longer intersect (0 when they do not), by bisection to RESOLUTION_MM."""
+def penetration_along(queries: ExactQueries, i: int, pose_a: np.ndarray, j: int, pose_b: np.ndarray,
+                      direction: np.ndarray) -> float:
+    """mm: least translation of body j (at pose_b) along `direction` (unit, arch frame) after which
+    the meshes of bodies i and j of `queries` no longer intersect (0 when they do not), by
+    bisection to RESOLUTION_MM."""
     def apart(d: float) -> bool:
         T = np.array(pose_b, float)
         T[:3, 3] += d * direction
-        meshquery.set_pose(obj_a, pose_a)
-        meshquery.set_pose(obj_b, T)
-        return not meshquery.collide(obj_a, obj_b)[0]
+        return not queries.body_intersects(i, pose_a, j, T)
 
     if apart(0.0):
         return 0.0
@@ -77,12 +76,12 @@ def penetration_along(obj_a, pose_a: np.ndarray, obj_b, pose_b: np.ndarray, dire
 def reduction_for(model, dentition, a: int, b: int, pose_a: np.ndarray, pose_b: np.ndarray, source=None,
                   queries: ExactQueries | None = None) -> InterproximalReduction:
     """The IPR that lets neighbours a and b (FDI) stand at the given target poses (queries: the
-    caller's `ExactQueries` of `model`, whose FCL objects it re-poses; one is made when None)."""
+    caller's `ExactQueries` of `model`; one is made when None)."""
     ca = dentition.teeth[a].to_world(dentition.teeth[a].crown_center, pose_a)
     cb = dentition.teeth[b].to_world(dentition.teeth[b].crown_center, pose_b)
     u = (cb - ca) / np.linalg.norm(cb - ca)
     queries = queries or ExactQueries(model)
-    amount = penetration_along(queries.object(model.index[a]), pose_a, queries.object(model.index[b]), pose_b, u)
+    amount = penetration_along(queries, model.index[a], pose_a, model.index[b], pose_b, u)
     if amount > MAX_IPR_MM:
         raise StagingError(source, f"target of teeth {a} and {b}",
                            f"the two teeth overlap by more than {MAX_IPR_MM:g} mm at the target: no reduction can make room",

@@ -19,6 +19,10 @@ distance at chosen times:
   distance at an earlier sample (d > mu (t' - t)). An intersection deeper than step_mm / 2 at
   any time lies within step_mm / 2 of a sample's relative pose, so it is found there.
 
+Both are algorithms of their own (the verifier's dense grid is independent of the planner's
+advancement), asking their exact questions (intersection at a pose, distance at a pose) of the
+collision package's `ExactQueries` over the teeth's meshes alone, not of FCL directly.
+
 Units: mm, poses (4, 4) local -> arch frame; times are fractions 0..1 of the stage.
 """
 
@@ -30,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orthosim.geometry import meshquery
+from orthosim.collision.queries import ExactQueries
 from orthosim.geometry.motion import PosePath, chord_deviation_bound, relative_speed_bound, rotation_angle
 
 
@@ -41,22 +45,25 @@ class Clearance:
     min_mm: float  # smallest sampled distance (0.0: the meshes intersect at `time`)
     lower_bound_mm: float  # proven: the distance never falls below this during the stage
     time: float  # fraction 0..1 of the stage where min_mm was found
-    samples: int  # FCL distance queries made
+    samples: int  # FCL queries made
 
 
 class PairMotion:
-    """Teeth a and b over one stage: FCL objects of their meshes (shared, re-posed on each query),
-    the farthest vertex of each from its local origin (mm), and both motions (4, 4) T0 -> T1.
+    """Teeth a and b over one stage: bodies i and j of the staged teeth's `ExactQueries` (which
+    answer every exact question: FCL on the placed meshes, remembered), the farthest vertex of
+    each from its local origin (mm, `rho_max`), and both motions (4, 4) T0 -> T1.
 
-    At t = 0 and t = 1 the end poses themselves are used (bit for bit, not re-interpolated), and
-    distances there are kept in `memo` (shared by the caller across stages, keyed by the two
-    poses' bytes): a stage's end is the next one's start, and teeth at rest keep their poses."""
+    At t = 0 and t = 1 the end poses themselves are used (bit for bit, not re-interpolated), so
+    the queries' memo (kept across stages, keyed by the bodies and the two poses' bytes) answers
+    again what a stage's end asked: a stage's end is the next one's start, and teeth at rest keep
+    their poses. `queries` counts the FCL queries made for this motion (remembered answers and
+    intersection tests that an earlier distance proves false cost none)."""
 
-    def __init__(self, obj_a, rho_a: float, Ta0, Ta1, obj_b, rho_b: float, Tb0, Tb1, memo: dict | None = None):
-        self.obj_a, self.obj_b = obj_a, obj_b
+    def __init__(self, exact: ExactQueries, i: int, Ta0, Ta1, j: int, Tb0, Tb1):
+        self.exact, self.i, self.j = exact, i, j
         self.path_a, self.path_b = PosePath(Ta0, Ta1), PosePath(Tb0, Tb1)
-        self.mu = relative_speed_bound(Ta0, Ta1, rho_a, Tb0, Tb1, rho_b)  # mm per unit stage time
-        self.memo = {} if memo is None else memo
+        rho = exact.model.rho_max
+        self.mu = relative_speed_bound(Ta0, Ta1, rho[i], Tb0, Tb1, rho[j])  # mm per unit stage time
         self.queries = 0
 
     def _poses(self, t: float) -> tuple[np.ndarray, np.ndarray]:
@@ -64,25 +71,22 @@ class PairMotion:
             return self.path_a.T1, self.path_b.T1
         return self.path_a.at(t), self.path_b.at(t)
 
+    def _fcl_calls(self) -> int:
+        return self.exact.queries + self.exact.collides
+
     def intersects(self, t: float) -> bool:
+        before = self._fcl_calls()
         Ta, Tb = self._poses(t)
-        meshquery.set_pose(self.obj_a, Ta)
-        meshquery.set_pose(self.obj_b, Tb)
-        self.queries += 1
-        return meshquery.collide(self.obj_a, self.obj_b)[0]
+        hit = self.exact.body_intersects(self.i, Ta, self.j, Tb)
+        self.queries += self._fcl_calls() - before
+        return hit
 
     def distance(self, t: float) -> float:
         """mm between the meshes at time t (0.0 when they intersect)."""
+        before = self._fcl_calls()
         Ta, Tb = self._poses(t)
-        key = (id(self.obj_a), id(self.obj_b), Ta.tobytes(), Tb.tobytes()) if t in (0.0, 1.0) else None
-        if key is not None and key in self.memo:
-            return self.memo[key]
-        meshquery.set_pose(self.obj_a, Ta)
-        meshquery.set_pose(self.obj_b, Tb)
-        self.queries += 1
-        d = meshquery.distance(self.obj_a, self.obj_b)
-        if key is not None:
-            self.memo[key] = d
+        d = self.exact.body_distance(self.i, Ta, self.j, Tb)
+        self.queries += self._fcl_calls() - before
         return d
 
 
@@ -140,11 +144,6 @@ def first_contact_on_grid(motion: PairMotion, step_mm: float) -> float | None:
     return None
 
 
-def rho_of(mesh) -> float:
-    """mm: the farthest vertex of a mesh (local frame) from its local origin."""
-    return float(np.linalg.norm(np.asarray(mesh.vertices, float), axis=1).max())
-
-
 def closest_approach(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndarray) -> float:
     """mm: the least distance between two points moving on straight lines at constant speed over
     the stage, a0 -> a1 and b0 -> b1 ((3,) mm each), at the same times."""
@@ -157,11 +156,13 @@ def closest_approach(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndar
 
 
 Shifts = dict  # (FDI a, FDI b) -> ((3,) mm, (3,) mm): offsets of a and b when that pair is tested (IPR)
+MEMO_SIZE = 1 << 16  # exact answers remembered: every stage end of a staging (see PairMotion)
 
 
 class ToothBodies:
-    """The staged teeth as exact bodies: one FCL object per tooth (re-posed on each query) and its
-    rho (mm), for any pair's motion over any stage.
+    """The staged teeth as exact bodies: their meshes' `ExactQueries` (no sphere trees: this is
+    the certificate's and the independent verifier's view, built from meshes alone) and each
+    tooth's bounding sphere, for any pair's motion over any stage.
 
     shifts: (FDI a, FDI b) -> ((3,) mm, (3,) mm) arch-frame offsets added to a's and b's positions
     whenever that pair (and only that pair) is measured: how interproximal reduction is modelled
@@ -169,13 +170,13 @@ class ToothBodies:
     """
 
     def __init__(self, meshes: dict, shifts: Shifts | None = None):
-        self.objects = {n: meshquery.fcl_object(m) for n, m in meshes.items()}
-        self.rho = {n: rho_of(m) for n, m in meshes.items()}
+        # whole meshes, no patches: samples across a stage move a pair too far for patches to last
+        self.queries = ExactQueries.of_meshes(meshes, memo_size=MEMO_SIZE, patch_reach_mm=0.0)
+        self.index = self.queries.model.index  # FDI -> body index of the queries
         # a bounding sphere per tooth about its box centre (local frame), for the pair filter
         self.centre = {n: np.asarray(m.bounds, float).mean(axis=0) for n, m in meshes.items()}
         self.radius = {n: float(np.linalg.norm(np.asarray(m.vertices, float) - self.centre[n], axis=1).max())
                        for n, m in meshes.items()}
-        self.memo: dict = {}  # end-of-stage distances, shared by every PairMotion made here
         self.shifts: Shifts = {}
         for (a, b), (sa, sb) in (shifts or {}).items():
             self.shifts[(a, b)] = (np.asarray(sa, float), np.asarray(sb, float))
@@ -190,14 +191,14 @@ class ToothBodies:
                 T[:3, 3] += s[0]
             for T in (Tb0, Tb1):
                 T[:3, 3] += s[1]
-        return PairMotion(self.objects[a], self.rho[a], Ta0, Ta1, self.objects[b], self.rho[b], Tb0, Tb1, self.memo)
+        return PairMotion(self.queries, self.index[a], Ta0, Ta1, self.index[b], Tb0, Tb1)
 
     def near_pairs(self, P0: dict, P1: dict, reach_mm: float) -> list[tuple[int, int]]:
         """(a, b) with a < b of every pair that may come within reach_mm of each other during the
         motion P0 -> P1 (FDI -> (4, 4)). Each tooth's bounding-sphere centre strays from its chord
         by at most `chord_deviation_bound` (`geometry.motion`), so a pair whose chords never come
         within the two radii, both deviations, reach_mm and its IPR shift of each other cannot."""
-        teeth = sorted(self.objects)
+        teeth = sorted(self.index)
         ends, slack = {}, {}
         for n in teeth:
             T0, T1 = np.asarray(P0[n], float), np.asarray(P1[n], float)

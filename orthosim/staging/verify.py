@@ -175,6 +175,6 @@ def _ipr(verdict: Verdict, written: WrittenStaging, dentition, target: dict, bod
         if np.abs(u - r.direction).max() > 1e-6:
             verdict.violations.append(Violation(1, "ipr", f"{name}: its direction is not from {a}'s crown centre to {b}'s at the target"))
             continue
-        overlap = penetration_along(bodies.objects[a], target[a], bodies.objects[b], target[b], u)
+        overlap = penetration_along(bodies.queries, bodies.index[a], target[a], bodies.index[b], target[b], u)
         if r.amount_mm > overlap + RESOLUTION_MM:
             verdict.violations.append(Violation(1, "ipr", f"{name}: more than the teeth overlap at the target ({overlap:.3f} mm)"))
