@@ -39,7 +39,7 @@ import numpy as np
 import trimesh
 from numba import njit
 
-from orthosim.geometry.signeddistance import (MeshSurface, closest_face, distance_to_face, mesh_surface, pushed,
+from orthosim.geometry.signeddistance import (STACK, MeshSurface, closest_face, distance_to_face, mesh_surface,
                                               signed_distances, surface_within)
 
 DEPTH_TOLERANCE_MM = 0.01  # the surface depth is found to within this below the truth
@@ -176,7 +176,7 @@ def _reaching_faces(own, other, floor):
     Every face left out is one the three passes would have measured and dropped (all its points
     below floor)."""
     keep = np.zeros(own.faces.shape[0], np.bool_)
-    stack = np.empty(128, np.int64)
+    stack = np.empty(STACK, np.int64)
     stack[0] = 0
     top = 1
     while top > 0:
@@ -188,7 +188,7 @@ def _reaching_faces(own, other, floor):
             for i in range(own.start[k], own.start[k] + own.count[k]):
                 keep[own.order[i]] = True
             continue
-        stack = pushed(stack, top, own.left[k], own.right[k])
+        stack[top], stack[top + 1] = own.left[k], own.right[k]
         top += 2
     return keep
 
@@ -243,7 +243,7 @@ def _tangent_points(own: MeshSurface, faces: np.ndarray, verts: np.ndarray) -> t
     a = own.arrays
     tri = a.vertices[a.faces[faces]]
     mids = 0.5 * (tri + np.roll(tri, -1, axis=1))
-    pts = np.concatenate([a.vertices[verts], own.face_centroids[faces], mids.reshape(-1, 3)])
+    pts = np.concatenate([a.vertices[verts], tri.mean(axis=1), mids.reshape(-1, 3)])
     nrm = np.concatenate([a.vertex_normals[verts], a.face_normals[faces], np.repeat(a.face_normals[faces], 3, axis=0)])
     return np.ascontiguousarray(pts), np.ascontiguousarray(nrm)
 

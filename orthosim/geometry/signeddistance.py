@@ -29,17 +29,25 @@ import trimesh
 from numba import njit
 
 LEAF_FACES = 8  # faces in a leaf of the hierarchy
+# Nodes a depth-first descent of a hierarchy holds at once: one waiting sibling per level and the two
+# children just pushed. `build_hierarchy` halves a node's faces, so a mesh of n faces has at most
+# log2(n) + 1 levels: 128 holds any mesh that int64 indices can count.
+STACK = 128
 
 
 class SurfaceArrays(NamedTuple):
-    """A closed mesh as the compiled queries take it (mm, the mesh's frame unless moved). Node `k`
-    of the hierarchy covers faces `order[start[k]:start[k] + count[k]]`, children `left[k]`,
-    `right[k]` (-1 for a leaf), node 0 the root."""
+    """A mesh as the compiled queries take it (mm, the mesh's frame unless moved). Node `k` of the
+    hierarchy covers the faces `order[start[k]:start[k] + count[k]]`, whose corners are
+    `triangles[start[k]:start[k] + count[k]]` (one stretch of memory a leaf: a third faster than
+    reading the corners through `faces`); children `left[k]`, `right[k]` (-1 for a leaf), node 0
+    the root."""
 
     vertices: np.ndarray  # (v, 3) float64
-    faces: np.ndarray  # (f, 3) int64, counter-clockwise seen from outside
+    faces: np.ndarray  # (f, 3) int64 vertex indices, counter-clockwise seen from outside
+    triangles: np.ndarray  # (f, 3, 3) corners of face order[i] at row i (the hierarchy's order)
     face_normals: np.ndarray  # (f, 3) unit, outward
-    edge_normals: np.ndarray  # (f, 3, 3) per face edge ab, bc, ca: the sum of its two faces' normals
+    face_edges: np.ndarray  # (f, 3) int64 each face's edges ab, bc, ca (indices into edge_normals)
+    edge_normals: np.ndarray  # (e, 3) per edge the sum of its two faces' normals
     vertex_normals: np.ndarray  # (v, 3) unit, angle-weighted
     node_center: np.ndarray  # (k, 3) each node's bounding sphere
     node_radius: np.ndarray  # (k,)
@@ -55,22 +63,29 @@ class SurfaceArrays(NamedTuple):
 class MeshSurface:
     """A triangle mesh prepared for signed distances (the model: built once, read-only): its arrays
     for the compiled queries (`arrays`), its unique edges (`edges` (e, 2) vertex pairs, lower index
-    first; `face_edges` (f, 3) each face's edges ab, bc, ca), its face centroids (f, 3) and whether
-    it is closed and consistently oriented, so that the sign tells inside from outside."""
+    first, in the order of `arrays.edge_normals`) and whether it is closed and consistently
+    oriented, so that the sign tells inside from outside."""
 
     def __init__(self, mesh: trimesh.Trimesh):
         V = np.ascontiguousarray(mesh.vertices, float)
         F = np.ascontiguousarray(mesh.faces, np.int64)
         if len(F) == 0:
             raise ValueError("a mesh with no faces has no inside")
-        self.edges, self.face_edges = _edges(V, F)
-        self.closed = _closed(F, self.face_edges, len(self.edges))
-        face_n, edge_n, vert_n = _pseudonormals(V, F, self.face_edges, len(self.edges))
+        self.edges, face_edges = _edges(V, F)
+        self.closed = _closed(F, face_edges, len(self.edges))
+        face_n, edge_n, vert_n = _pseudonormals(V, F, face_edges, len(self.edges))
         tri = V[F]
-        self.face_centroids = np.ascontiguousarray(tri.mean(axis=1))
-        face_radii = np.linalg.norm(tri - self.face_centroids[:, None, :], axis=2).max(axis=1) * (1 + 1e-12) + 1e-12
-        tree = build_hierarchy(self.face_centroids, face_radii, tri.min(axis=1), tri.max(axis=1), LEAF_FACES)
-        self.arrays = SurfaceArrays(V, F, face_n, edge_n, vert_n, *tree)
+        centroids = tri.mean(axis=1)
+        radii = np.linalg.norm(tri - centroids[:, None, :], axis=2).max(axis=1) * (1 + 1e-12) + 1e-12
+        tree = build_hierarchy(centroids, radii, tri.min(axis=1), tri.max(axis=1), LEAF_FACES)
+        self.arrays = SurfaceArrays(V, F, np.ascontiguousarray(tri[tree[-1]]), face_n, face_edges, edge_n, vert_n, *tree)
+        lo, hi = V.min(axis=0), V.max(axis=0)
+        self._sphere = (lo + hi) / 2, float(np.linalg.norm(V - (lo + hi) / 2, axis=1).max())
+
+    @property
+    def face_edges(self) -> np.ndarray:
+        """(f, 3) each face's edges ab, bc, ca, as rows of `edges`."""
+        return self.arrays.face_edges
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -79,8 +94,9 @@ class MeshSurface:
 
     @property
     def bounding_sphere(self) -> tuple[np.ndarray, float]:
-        """((3,) centre, radius) mm: a sphere holding every triangle (the hierarchy's root)."""
-        return self.arrays.node_center[0], float(self.arrays.node_radius[0])
+        """((3,) centre, radius) mm: a sphere holding the mesh, centred on its box (tighter than the
+        hierarchy's root, which is centred on the faces' mean: what keeps far teeth out of a map)."""
+        return self._sphere
 
     def signed_distance(self, points: np.ndarray, cap_mm: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
         """(n, 3) points in the mesh's frame (mm) -> ((n,) signed distance to the surface, mm,
@@ -90,11 +106,12 @@ class MeshSurface:
         return signed_distances(pts, self.arrays, float(cap_mm))
 
     def moved(self, M: np.ndarray) -> SurfaceArrays:
-        """The arrays with the mesh moved by the rigid transform M (4, 4): vertices, normals and
+        """The arrays with the mesh moved by the rigid transform M (4, 4): corners, normals and
         spheres turned and shifted; the boxes, which do not turn with it, left unbounded."""
         R, t = M[:3, :3], M[:3, 3]
         a = self.arrays
         return a._replace(vertices=np.ascontiguousarray(a.vertices @ R.T + t),
+                          triangles=np.ascontiguousarray(a.triangles @ R.T + t),
                           face_normals=np.ascontiguousarray(a.face_normals @ R.T),
                           edge_normals=np.ascontiguousarray(a.edge_normals @ R.T),
                           vertex_normals=np.ascontiguousarray(a.vertex_normals @ R.T),
@@ -135,8 +152,8 @@ def _closed(F: np.ndarray, face_edges: np.ndarray, n_edges: int) -> bool:
 
 
 def _pseudonormals(V: np.ndarray, F: np.ndarray, face_edges: np.ndarray, n_edges: int):
-    """Unit face normals (f, 3), edge pseudonormals per face edge (f, 3, 3: edges ab, bc, ca; the
-    sum of the normals of the faces sharing it) and angle-weighted vertex normals (v, 3): each
+    """Unit face normals (f, 3), edge pseudonormals (e, 3: the sum of the normals of the faces
+    sharing the edge) and angle-weighted vertex normals (v, 3): each
     face's normal weighted by its angle at the vertex (Baerentzen and Aanaes 2005, "Signed distance
     computation using the angle weighted pseudonormal", IEEE TVCG 11(3)). Only their directions
     count: the sign of (p - closest point) against them."""
@@ -145,8 +162,7 @@ def _pseudonormals(V: np.ndarray, F: np.ndarray, face_edges: np.ndarray, n_edges
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     flat = face_edges.reshape(-1)
     per_corner = np.repeat(n, 3, axis=0)
-    summed = np.stack([np.bincount(flat, per_corner[:, a], n_edges) for a in range(3)], axis=1)
-    edge_n = np.ascontiguousarray(summed[flat].reshape(-1, 3, 3))
+    edge_n = np.ascontiguousarray(np.stack([np.bincount(flat, per_corner[:, a], n_edges) for a in range(3)], axis=1))
     angle_n = []
     for k in range(3):
         u = tri[:, (k + 1) % 3] - tri[:, k]
@@ -221,35 +237,38 @@ def build_hierarchy(FC, FR, corner_lo, corner_hi, leaf_faces):
             left[:k].copy(), right[:k].copy(), start[:k].copy(), count[:k].copy(), order)
 
 
-@njit(cache=True, nogil=True)
-def closest_on_face(p, s, f):
-    """The closest point of face f of the mesh `s` to p (3,): (feature, x, y, z), feature 0 the
-    face's inside, 1-3 its corner a, b, c, 4-6 its edge ab, bc, ca. Ericson 2005, Real-Time
-    Collision Detection, section 5.1.5: the Voronoi regions of the corners and edges tested in turn
-    by the dot products d1..d6 and the barycentric va, vb, vc. Written on scalars: no array is made."""
-    V, F = s.vertices, s.faces
-    ia, ib, ic = F[f, 0], F[f, 1], F[f, 2]
-    ax, ay, az = V[ia, 0], V[ia, 1], V[ia, 2]
-    bx, by, bz = V[ib, 0], V[ib, 1], V[ib, 2]
-    cx, cy, cz = V[ic, 0], V[ic, 1], V[ic, 2]
+@njit(cache=True, nogil=True, inline="always")
+def _along_sides(p, x, y, z, abx, aby, abz, acx, acy, acz):
+    """The dot products of p - (x, y, z) with a triangle's sides ab and ac."""
+    px, py, pz = p[0] - x, p[1] - y, p[2] - z
+    return abx * px + aby * py + abz * pz, acx * px + acy * py + acz * pz
+
+
+@njit(cache=True, nogil=True, inline="always")
+def closest_on_triangle(p, corners, i):
+    """The closest point to p (3,) of triangle i of `corners` (n, 3, 3: a, b, c each): (feature, x,
+    y, z), feature 0 the triangle's inside, 1-3 its corner a, b, c, 4-6 its edge ab, bc, ca.
+    Ericson 2005, Real-Time Collision Detection, section 5.1.5: the Voronoi regions of the corners
+    and edges tested in turn by the dot products d1..d6 and the barycentric va, vb, vc. On scalars:
+    no array is made."""
+    ax, ay, az = corners[i, 0, 0], corners[i, 0, 1], corners[i, 0, 2]
+    bx, by, bz = corners[i, 1, 0], corners[i, 1, 1], corners[i, 1, 2]
+    cx, cy, cz = corners[i, 2, 0], corners[i, 2, 1], corners[i, 2, 2]
     abx, aby, abz = bx - ax, by - ay, bz - az
     acx, acy, acz = cx - ax, cy - ay, cz - az
-    d1 = abx * (p[0] - ax) + aby * (p[1] - ay) + abz * (p[2] - az)
-    d2 = acx * (p[0] - ax) + acy * (p[1] - ay) + acz * (p[2] - az)
+    d1, d2 = _along_sides(p, ax, ay, az, abx, aby, abz, acx, acy, acz)
     if d1 <= 0.0 and d2 <= 0.0:
         return 1, ax, ay, az
-    d3 = abx * (p[0] - bx) + aby * (p[1] - by) + abz * (p[2] - bz)
-    d4 = acx * (p[0] - bx) + acy * (p[1] - by) + acz * (p[2] - bz)
+    d3, d4 = _along_sides(p, bx, by, bz, abx, aby, abz, acx, acy, acz)
     if d3 >= 0.0 and d4 <= d3:
         return 2, bx, by, bz
+    d5, d6 = _along_sides(p, cx, cy, cz, abx, aby, abz, acx, acy, acz)
+    if d6 >= 0.0 and d5 <= d6:  # corner c before edge ab (Ericson's order): their regions are apart
+        return 3, cx, cy, cz
     vc = d1 * d4 - d3 * d2
     if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
         v = d1 / (d1 - d3)
         return 4, ax + v * abx, ay + v * aby, az + v * abz
-    d5 = abx * (p[0] - cx) + aby * (p[1] - cy) + abz * (p[2] - cz)
-    d6 = acx * (p[0] - cx) + acy * (p[1] - cy) + acz * (p[2] - cz)
-    if d6 >= 0.0 and d5 <= d6:
-        return 3, cx, cy, cz
     vb = d5 * d2 - d1 * d6
     if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
         w = d2 / (d2 - d6)
@@ -267,7 +286,10 @@ def closest_on_face(p, s, f):
 @njit(cache=True, nogil=True)
 def distance_to_face(p, s, f):
     """mm from p (3,) to face f of the mesh `s`."""
-    _, x, y, z = closest_on_face(p, s, f)
+    corners = np.empty((1, 3, 3))
+    for k in range(3):
+        corners[0, k] = s.vertices[s.faces[f, k]]
+    _, x, y, z = closest_on_triangle(p, corners, 0)
     return np.sqrt((p[0] - x) ** 2 + (p[1] - y) ** 2 + (p[2] - z) ** 2)
 
 
@@ -286,18 +308,6 @@ def node_gap(p, s, k):
     return max(sphere, np.sqrt(bx * bx + by * by + bz * bz))
 
 
-@njit(cache=True, nogil=True, inline="always")
-def pushed(stack, top, a, b):
-    """`stack` (node indices, `top` of them in use) with a and b pushed, grown twice over when full."""
-    if top + 2 > stack.shape[0]:
-        grown = np.empty(2 * stack.shape[0], np.int64)
-        grown[:top] = stack[:top]
-        stack = grown
-    stack[top] = a
-    stack[top + 1] = b
-    return stack
-
-
 @njit(cache=True, nogil=True)
 def _feature_side(p, s, f, feature, x, y, z):
     """+1.0 where p lies outside the surface at its closest point (x, y, z) on face f's `feature`,
@@ -307,62 +317,60 @@ def _feature_side(p, s, f, feature, x, y, z):
     elif feature <= 3:
         n = s.vertex_normals[s.faces[f, feature - 1]]
     else:
-        n = s.edge_normals[f, feature - 4]
+        n = s.edge_normals[s.face_edges[f, feature - 4]]
     if (p[0] - x) * n[0] + (p[1] - y) * n[1] + (p[2] - z) * n[2] > 0.0:
         return 1.0
     return -1.0
 
 
 @njit(cache=True, nogil=True)
-def closest_face(p, s, cap):
-    """(signed distance from p (3,) to the surface of `s`, mm, negative inside; the face holding its
-    closest point), or (+inf, -1) when no point of the surface lies within `cap` mm. Nearest node
-    first; a node whose gap (`node_gap`) is no less than the best distance found is skipped."""
-    best2 = cap * cap
-    best_f, best_feat = -1, 0
-    bx = by = bz = 0.0
-    stack = np.empty(128, np.int64)
-    gaps = np.empty(128)  # each stacked node's gap, found when it was pushed
-    stack[0], gaps[0] = 0, 0.0
-    top = 1
-    while top > 0:
-        top -= 1
-        k, gap = stack[top], gaps[top]
-        if gap > 0.0 and gap * gap >= best2:
-            continue
-        if s.left[k] < 0:
-            for i in range(s.start[k], s.start[k] + s.count[k]):
-                f = s.order[i]
-                feat, x, y, z = closest_on_face(p, s, f)
-                d2 = (p[0] - x) ** 2 + (p[1] - y) ** 2 + (p[2] - z) ** 2
-                if d2 < best2:
-                    best2, best_f, best_feat = d2, f, feat
-                    bx, by, bz = x, y, z
-            continue
-        l, r = s.left[k], s.right[k]
-        gl, gr = node_gap(p, s, l), node_gap(p, s, r)
-        if top + 2 > stack.shape[0]:
-            grown_gaps = np.empty(2 * gaps.shape[0])
-            grown_gaps[:top] = gaps[:top]
-            gaps = grown_gaps
-        if gl < gr:  # nearer child popped first
-            l, r, gl, gr = r, l, gr, gl
-        stack = pushed(stack, top, l, r)
-        gaps[top], gaps[top + 1] = gl, gr
-        top += 2
-    if best_f < 0:
-        return np.inf, -1
-    return _feature_side(p, s, best_f, best_feat, bx, by, bz) * np.sqrt(best2), best_f
+def signed_distances(points, s, cap):
+    """For each of the points (n, 3): its signed distance to the surface of `s` (mm, negative
+    inside; +inf where no point of the surface lies within `cap` mm) and the face holding its
+    closest point (-1 beyond the cap): ((n,), (n,)). Nearest node first; a node whose gap
+    (`node_gap`) is no less than the best distance found is skipped. One loop over the points
+    (a call a point would pass the mesh's arrays, and count their references, each time)."""
+    out = np.full(points.shape[0], np.inf)
+    faces = np.full(points.shape[0], -1, np.int64)
+    stack, gaps = np.empty(STACK, np.int64), np.empty(STACK)
+    for n in range(points.shape[0]):
+        p = points[n]
+        best2 = cap * cap
+        best_i, best_feat = -1, 0
+        bx = by = bz = 0.0
+        stack[0], gaps[0] = 0, node_gap(p, s, 0)  # a point beyond the cap of the whole mesh ends here
+        top = 1
+        while top > 0:
+            top -= 1
+            k, gap = stack[top], gaps[top]
+            if gap > 0.0 and gap * gap >= best2:
+                continue
+            if s.left[k] < 0:
+                for i in range(s.start[k], s.start[k] + s.count[k]):
+                    feat, x, y, z = closest_on_triangle(p, s.triangles, i)
+                    d2 = (p[0] - x) ** 2 + (p[1] - y) ** 2 + (p[2] - z) ** 2
+                    if d2 < best2:
+                        best2, best_i, best_feat = d2, i, feat
+                        bx, by, bz = x, y, z
+                continue
+            l, r = s.left[k], s.right[k]
+            gl, gr = node_gap(p, s, l), node_gap(p, s, r)
+            if gl < gr:  # nearer child popped first
+                l, r, gl, gr = r, l, gr, gl
+            stack[top], stack[top + 1] = l, r
+            gaps[top], gaps[top + 1] = gl, gr
+            top += 2
+        if best_i >= 0:
+            faces[n] = s.order[best_i]
+            out[n] = _feature_side(p, s, faces[n], best_feat, bx, by, bz) * np.sqrt(best2)
+    return out, faces
 
 
 @njit(cache=True, nogil=True)
-def signed_distances(points, s, cap):
-    """`closest_face` for each of the points (n, 3): ((n,) signed distances mm, (n,) faces)."""
-    out = np.empty(points.shape[0])
-    faces = np.empty(points.shape[0], np.int64)
-    for i in range(points.shape[0]):
-        out[i], faces[i] = closest_face(points[i], s, cap)
-    return out, faces
+def closest_face(p, s, cap):
+    """`signed_distances` of the one point p (3,): (signed distance mm, face)."""
+    d, f = signed_distances(p.reshape(1, 3), s, cap)
+    return d[0], f[0]
 
 
 @njit(cache=True, nogil=True)
@@ -370,7 +378,7 @@ def surface_within(p, rho, s):
     """Whether any point of the surface of `s` lies closer than rho (mm) to p (3,). Stops at the
     first found: far cheaper than the closest point for a point deep inside, where every face is
     about as far."""
-    stack = np.empty(128, np.int64)
+    stack = np.empty(STACK, np.int64)
     stack[0] = 0
     top = 1
     rho2 = rho * rho
@@ -381,10 +389,10 @@ def surface_within(p, rho, s):
             continue
         if s.left[k] < 0:
             for i in range(s.start[k], s.start[k] + s.count[k]):
-                _, x, y, z = closest_on_face(p, s, s.order[i])
+                _, x, y, z = closest_on_triangle(p, s.triangles, i)
                 if (p[0] - x) ** 2 + (p[1] - y) ** 2 + (p[2] - z) ** 2 < rho2:
                     return True
             continue
-        stack = pushed(stack, top, s.left[k], s.right[k])
+        stack[top], stack[top + 1] = s.left[k], s.right[k]
         top += 2
     return False
