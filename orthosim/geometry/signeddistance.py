@@ -12,10 +12,14 @@ first and skips every node whose bound lies beyond the best distance found, so n
 is ever skipped. Inside or outside: the sign of the closest feature's angle-weighted pseudonormal
 (Baerentzen and Aanaes 2005), exact for closed, consistently oriented meshes (`MeshSurface.closed`).
 
+Distances can be capped: a point with no surface within `cap_mm` is answered +inf ("far") after a
+look at the hierarchy's top, which keeps a whole arch's distance map to a fraction of a second. A
+mesh moved by a rigid transform (`MeshSurface.moved`) keeps its hierarchy's spheres, not its boxes.
+
 Compiled with numba: trimesh's closest-point query gathers candidates in Python and FCL answers one
-object pair per call; for the 40,000 crown vertices of a dentition both take seconds, this a
-fraction of one. Every compiled query takes the mesh as one argument, `SurfaceArrays` (a named
-tuple of arrays, which numba compiles and caches like its arrays). Imported on demand only (numba's
+object pair per call; for the 240,000 crown vertices of a real dentition both take seconds or more,
+this about one. Every compiled query takes the mesh as one argument, `SurfaceArrays` (a named tuple
+of arrays, which numba compiles and caches like its arrays). Imported on demand only (numba's
 start-up is not for the drawing side).
 """
 
@@ -38,8 +42,8 @@ STACK = 128
 class SurfaceArrays(NamedTuple):
     """A mesh as the compiled queries take it (mm, the mesh's frame unless moved). Node `k` of the
     hierarchy covers the faces `order[start[k]:start[k] + count[k]]`, whose corners are
-    `triangles[start[k]:start[k] + count[k]]` (one stretch of memory a leaf: a third faster than
-    reading the corners through `faces`); children `left[k]`, `right[k]` (-1 for a leaf), node 0
+    `triangles[start[k]:start[k] + count[k]]` (one stretch of memory a leaf, faster to read than
+    the corners through `faces`); children `left[k]`, `right[k]` (-1 for a leaf), node 0
     the root."""
 
     vertices: np.ndarray  # (v, 3) float64
