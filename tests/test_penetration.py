@@ -13,7 +13,7 @@ import pytest
 import trimesh
 
 from orthosim.geometry import meshquery
-from orthosim.geometry.penetration import DEPTH_TOLERANCE_MM, edge_penetration_depth, mesh_geometry, penetration_depth
+from orthosim.geometry.penetration import DEPTH_TOLERANCE_MM, edge_penetration_depth, penetration_depth
 
 I4 = np.eye(4)
 
@@ -121,35 +121,12 @@ def test_the_edge_measure_lies_between_the_vertex_measure_and_the_whole_one(seed
     assert edge_penetration_depth(bar, pose, tooth, I4) == pytest.approx(edges, abs=DEPTH_TOLERANCE_MM)
 
 
-def test_each_face_names_its_own_three_edges():
-    tooth = _tooth()
-    geo = mesh_geometry(tooth)
-    for f in (0, 7, len(tooth.faces) - 1):
-        own = {frozenset(e) for e in geo.edges[geo.face_edges[f]].tolist()}
-        a, b, c = tooth.faces[f].tolist()
-        assert own == {frozenset((a, b)), frozenset((b, c)), frozenset((c, a))}
-    assert len(geo.edges) == len(tooth.edges_unique)
-
-
-def test_a_mesh_has_an_inside_only_when_closed_and_consistently_wound():
-    box = trimesh.creation.box((2.0, 4.0, 6.0))
-    holed = trimesh.Trimesh(box.vertices, box.faces[1:], process=False)
-    flipped = trimesh.Trimesh(box.vertices, np.vstack([box.faces[:1, ::-1], box.faces[1:]]), process=False)
-    assert mesh_geometry(box).closed and mesh_geometry(_tooth()).closed
-    assert not mesh_geometry(holed).closed and not mesh_geometry(flipped).closed
-
-
-def test_the_inside_test_is_the_sign_of_the_closest_feature_normal():
-    box = trimesh.creation.box((2.0, 4.0, 6.0))
-    depths = mesh_geometry(box).signed_depth([[0, 0, 0], [0.9, 0, 0], [1.0, 1.0, 1.0], [1.5, 0, 0], [2.0, 3.0, 4.0]])
-    assert depths == pytest.approx([1.0, 0.1, 0.0, -0.5, -np.sqrt(1 + 1 + 1)], abs=1e-12)
-
-
 def test_neither_the_drawing_side_nor_the_interpenetration_module_imports_it_or_numba_eagerly():
     code = ("import sys\n"
             "import orthosim_render.timeline, orthosim.collision.interpenetration, orthosim.geometry, orthosim.geometry.motion\n"
             "light = ('orthosim.collision', 'orthosim.collision.detectors', 'orthosim.collision.interpenetration')\n"
-            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'numba' or m == 'orthosim.geometry.penetration'"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'numba'"
+            " or m in ('orthosim.geometry.penetration', 'orthosim.geometry.signeddistance')"
             " or (m.startswith('orthosim.collision') and m not in light)))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]

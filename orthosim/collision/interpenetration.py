@@ -63,9 +63,10 @@ def pair_depth(mesh_a, pose_a, mesh_b, pose_b) -> float:
     """mm two posed tooth meshes interpenetrate: `geometry.penetration.penetration_depth` for closed,
     consistently oriented meshes, else the vertex-based `geometry.meshquery.penetration_depth`."""
     from orthosim.geometry import meshquery
-    from orthosim.geometry.penetration import mesh_geometry, penetration_depth
+    from orthosim.geometry.penetration import penetration_depth
+    from orthosim.geometry.signeddistance import mesh_surface
 
-    if mesh_geometry(mesh_a).closed and mesh_geometry(mesh_b).closed:  # both have an inside
+    if mesh_surface(mesh_a).closed and mesh_surface(mesh_b).closed:  # both have an inside
         return penetration_depth(mesh_a, pose_a, mesh_b, pose_b)
     return meshquery.penetration_depth(mesh_a, pose_a, mesh_b, pose_b)
 

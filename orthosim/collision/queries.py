@@ -322,10 +322,11 @@ class ExactQueries:
         return self._remember(self._depths, key, (hit, depth))
 
     def _depth(self, i: int, pose_i: np.ndarray, j: int, pose_j: np.ndarray) -> float:
-        from orthosim.geometry.penetration import edge_penetration_depth, mesh_geometry  # numba: loaded on first use
+        from orthosim.geometry.penetration import edge_penetration_depth  # numba: loaded on first use
+        from orthosim.geometry.signeddistance import mesh_surface
 
         mesh_i, mesh_j = self.model.bodies[i].mesh, self.model.bodies[j].mesh
-        if mesh_geometry(mesh_i).closed and mesh_geometry(mesh_j).closed:  # both have an inside
+        if mesh_surface(mesh_i).closed and mesh_surface(mesh_j).closed:  # both have an inside
             return edge_penetration_depth(mesh_i, pose_i, mesh_j, pose_j)
         return meshquery.penetration_depth(mesh_i, pose_i, mesh_j, pose_j)
 

@@ -39,7 +39,7 @@ ENTRY_KIND = "dentition"
 _BUILDER_MODULES = ("model/anatomy", "model/archform", "model/dentition", "model/fdi", "collision/interpenetration",
                     "exchange/meshload", "exchange/meshfolder", "geometry/meshrefine", "analysis/occlusion", "exchange/openfulljaw",
                     "model/parametric", "exchange/scanfolders", "exchange/scanframe", "model/tooth", "model/toothshape",
-                    "geometry/meshquery", "geometry/penetration",
+                    "geometry/meshquery", "geometry/penetration", "geometry/signeddistance",
                     "model/rootsynthesis", "exchange/labelledscan", "geometry/meshcut")
 _PACKAGE = Path(__file__).resolve().parents[1]  # orthosim/
 

@@ -13,7 +13,7 @@ pair is clear, then closes it to first contact:
   by at most 110 * (0.5 pi / 180)^2 / 8 = 0.001 mm, far below the contact tolerance;
 - facing pairs that interpenetrate at rest (the scan's segmentation overlap, the rest state) may
   come back to that overlap but no deeper: every crown vertex's depth inside the other tooth
-  (`analysis.distancemap.SurfaceIndex`, the report's measure) at most its rest value plus the
+  (`geometry.signeddistance`, the report's measure) at most its rest value plus the
   tolerance; the angle where that limit is met is bisected. The step's pair depth
   (`ExactQueries.penetration`) also sees edges, whose interior can lie deeper than both ends by
   the sagitta of an edge over a cusp: 0.3 mm edges over a 2 mm cusp radius, 0.3^2 / 16 = 0.006 mm.
@@ -38,7 +38,6 @@ plane. Units: mm, degrees (positive opening: the incisors go down).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from functools import cached_property
 from typing import Mapping
 
 import numpy as np
@@ -159,8 +158,8 @@ class ClosureModel:  # eq=False and no slots: `_boxes` is cached in the instance
     @classmethod
     def build(cls, settings: ClosureSettings, dentition, facing, absent=frozenset()) -> "ClosureModel":
         """From the dentition at rest and the simulation's facing pairs (upper, lower)."""
-        from orthosim.analysis.distancemap import SurfaceIndex
         from orthosim.geometry import meshquery
+        from orthosim.geometry.signeddistance import mesh_surface
 
         if settings.condylar_axis_mm is not None:
             r, l = (np.asarray(p, float) for p in settings.condylar_axis_mm)
@@ -175,7 +174,7 @@ class ClosureModel:  # eq=False and no slots: `_boxes` is cached in the instance
             meshquery.set_pose(objects[n], rest[n])
         touched = [p for p in facing if meshquery.collide(objects[p[0]], objects[p[1]])[0]]
         crowns = {n: np.asarray(dentition.teeth[n].crown_vertices, float) for p in touched for n in p}
-        surfaces = {n: SurfaceIndex.of(dentition.teeth[n].mesh) for n in crowns}
+        surfaces = {n: mesh_surface(dentition.teeth[n].mesh) for n in crowns}
         model = cls(settings, axis, facing, {}, crowns, surfaces)
         for u, lo in touched:
             tu, tl = dentition.teeth[u], dentition.teeth[lo]
@@ -187,15 +186,6 @@ class ClosureModel:  # eq=False and no slots: `_boxes` is cached in the instance
         object.__setattr__(model, "molar_mm", np.mean([centers[n] for n in molars], axis=0))
         return model
 
-    @cached_property
-    def _boxes(self) -> dict[int, tuple[np.ndarray, np.ndarray]]:
-        """FDI -> ((3,), (3,)) mm: the local bounding box of each indexed tooth's surface."""
-        out = {}
-        for n, sf in self.surfaces.items():
-            corners = np.concatenate([sf.a, sf.b, sf.c])
-            out[n] = corners.min(axis=0), corners.max(axis=0)
-        return out
-
     def vertex_depths(self, a: int, b: int, poses: Mapping[int, np.ndarray]) -> np.ndarray:
         """(k,) mm each crown vertex of tooth a lies inside tooth b at `poses` (0 outside)."""
         V = self.crowns[a]
@@ -204,7 +194,7 @@ class ClosureModel:  # eq=False and no slots: `_boxes` is cached in the instance
         local = V @ M[:3, :3].T + M[:3, 3]
         surface = self.surfaces[b]
         out = np.zeros(len(V))
-        lo, hi = self._boxes[b]
+        lo, hi = surface.bounds
         near = np.flatnonzero(np.all((local >= lo) & (local <= hi), axis=1))  # only these can be inside
         if len(near):
             d, _ = surface.signed_distance(local[near], 5.0)
