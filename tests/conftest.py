@@ -42,10 +42,14 @@ def damage_tally(request) -> dict[str, int]:
 
 
 def pytest_collection_modifyitems(items):
-    """The long tests (marked slow) first, the rest after them in their own order: on pytest-xdist's
-    workers the long ones then start at once and the short ones fill in around them, instead of one
-    worker finishing a long test alone at the end of the session."""
-    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+    """The modules kept on one worker, then those holding long tests (marked slow), then the rest,
+    each module's tests kept together in their own order (a module's shared set-up is built once,
+    not again each time its tests resume): on pytest-xdist's workers the long ones start at once and the short ones fill
+    in around them, instead of one worker finishing a long test alone at the end of the session."""
+    has_slow = {item.module.__name__ for item in items if item.get_closest_marker("slow") is not None}
+    # a module kept on one worker (xdist_group) is the largest unit of work: those go first of all
+    grouped = {item.module.__name__ for item in items if item.get_closest_marker("xdist_group") is not None}
+    items.sort(key=lambda item: (item.module.__name__ not in grouped, item.module.__name__ not in has_slow))
 
 
 def pytest_runtest_setup(item):
