@@ -8,6 +8,10 @@ the parametric teeth alone.
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pytest
 
@@ -39,6 +43,20 @@ def damage_tally(request) -> dict[str, int]:
     tally: dict[str, int] = {}
     yield tally
     request.node.user_properties.append(("damaged_entries", dict(tally)))
+
+
+def pytest_sessionstart(session):
+    """Once per pytest-xdist session, in the controller before it starts its workers: the numba
+    kernels compiled in one process (`tests/numba_warmup.py`), so that the many processes the
+    workers start load them instead of each compiling them at once (a run without workers
+    compiles what it needs as it goes, and skips this)."""
+    config = session.config
+    if hasattr(config, "workerinput") or config.option.collectonly or not getattr(config.option, "numprocesses", None):
+        return
+    t = time.perf_counter()
+    done = subprocess.run([sys.executable, str(Path(__file__).with_name("numba_warmup.py"))], capture_output=True, text=True)
+    outcome = "compiled or loaded" if done.returncode == 0 else f"warm-up failed (exit {done.returncode}): {done.stderr.strip()[-300:]}"
+    session.config._orthosim_warmup = f"numba kernels {outcome} in {time.perf_counter() - t:.1f} s before the tests"
 
 
 def pytest_collection_modifyitems(items):
@@ -78,6 +96,9 @@ def pytest_terminal_summary(terminalreporter):
     ran = sum(v != "skipped" for v in _outcomes.values())
     skipped = sum(v == "skipped" for v in _outcomes.values())
     terminalreporter.write_line(f"real-data tests ({_REAL_DATA}): {ran} ran, {skipped} skipped")
+    warmup = getattr(terminalreporter.config, "_orthosim_warmup", None)
+    if warmup:
+        terminalreporter.write_line(warmup)
     over = sorted((s, n) for n, s in _fast_seconds.items() if s > FAST_TEST_BUDGET_S)
     if over:
         terminalreporter.write_line(f"fast-tier tests over the {FAST_TEST_BUDGET_S:.0f} s budget (mark them slow, or make "
