@@ -60,13 +60,14 @@ def pytest_sessionstart(session):
 
 
 def pytest_collection_modifyitems(items):
-    """The modules kept on one worker, then those holding long tests (marked slow), then the rest,
+    """The modules marked heavy_setup, then those holding long tests (marked slow), then the rest,
     each module's tests kept together in their own order (a module's shared set-up is built once,
-    not again each time its tests resume): on pytest-xdist's workers the long ones start at once and the short ones fill
-    in around them, instead of one worker finishing a long test alone at the end of the session."""
+    not again each time its tests resume): on pytest-xdist's workers the long ones start at once and
+    the short ones fill in around them, instead of one worker finishing a long test alone at the end."""
     has_slow = {item.module.__name__ for item in items if item.get_closest_marker("slow") is not None}
-    # a module kept on one worker (xdist_group) is the largest unit of work: those go first of all
-    grouped = {item.module.__name__ for item in items if item.get_closest_marker("xdist_group") is not None}
+    # `dev.sh test` keeps each module on one worker (--dist loadscope): a module whose tests share
+    # one costly set-up is the largest unit of work, so those go first of all
+    grouped = {item.module.__name__ for item in items if item.get_closest_marker("heavy_setup") is not None}
     items.sort(key=lambda item: (item.module.__name__ not in grouped, item.module.__name__ not in has_slow))
 
 

@@ -23,8 +23,8 @@ CROWDING = CASES_DIR / "staging_lower_incisor_crowding.toml"
 DIASTEMA = CASES_DIR / "staging_midline_diastema.toml"
 SHIPPED = sorted(CASES_DIR.glob("staging_*.toml"))
 
-# the module's stagings are made once, on one pytest-xdist worker (`--dist loadgroup`)
-pytestmark = pytest.mark.xdist_group("staging_outputs")
+# its tests share one costly set-up: the module is scheduled first (tests/conftest.py)
+pytestmark = pytest.mark.heavy_setup
 
 
 @pytest.fixture(scope="module")

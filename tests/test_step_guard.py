@@ -32,6 +32,9 @@ ROOT = Path(__file__).resolve().parent.parent
 GOLDEN = Path(__file__).resolve().parent / "golden" / "step_records.json"
 REGEN = os.environ.get("ORTHOSIM_REGEN_STEP_GUARD") == "1"
 
+# the models are built once for the module (`_models`): the module is scheduled first (tests/conftest.py)
+pytestmark = pytest.mark.heavy_setup
+
 PARAMETRIC_STEPS = 20  # at most: the paper's cases whole (their collisions come from step 2 to 19)
 REAL_STEPS = 2  # a real jaw's step costs seconds
 PARAMETRIC = ("case1_first_premolar_extraction", "case2_second_premolar_extraction",

@@ -24,8 +24,8 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 PIP_CACHE = Path(os.environ.get("ORTHOSIM_CACHE", Path.home() / ".cache" / "orthosim")) / "pip-wheel-test"
 
-# the wheel is built once, on one pytest-xdist worker (`--dist loadgroup`)
-pytestmark = pytest.mark.xdist_group("wheel_install")
+# its tests share one costly set-up: the module is scheduled first (tests/conftest.py)
+pytestmark = pytest.mark.heavy_setup
 
 USER_TEST = textwrap.dedent("""
     from orthosim.exchange.case import DEFAULT_CASE

@@ -56,7 +56,7 @@ fi
 case "$action" in
     install) echo "dev.sh: installed; run .venv/bin/orthosim --help" ;;
     demo) exec .venv/bin/orthosim demo "$@" ;;
-    # pytest-xdist: one worker per core; a module whose tests share one costly set-up (xdist_group) stays on one worker
-    test) exec .venv/bin/python -m pytest -n auto --dist loadgroup "$@" ;;
+    # pytest-xdist: one worker per core, each module on one worker (its module-wide set-ups built once)
+    test) exec .venv/bin/python -m pytest -n auto --dist loadscope "$@" ;;
     *) echo "dev.sh: unknown action '$action' (use demo, test or install)" >&2; exit 2 ;;
 esac

@@ -73,6 +73,21 @@ def _farthest_from_face(corners, s, f):
     return far
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _copy(dst, src):
+    """dst[...] = src for 1-D arrays of one length, element by element: numba's own array assignment
+    compiles its shape-mismatch error path (string formatting), seconds of every cold start."""
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _copy_rows(dst, src):
+    """`_copy` for 2-D arrays of one shape."""
+    for i in range(src.shape[0]):
+        _copy(dst[i], src[i])
+
+
 @njit(cache=True, nogil=True)
 def _surface_depth(tris, best, tol, s):
     """The largest depth inside the mesh `s` of any point of the triangles `tris` (t, 3, 3), at least
@@ -81,14 +96,15 @@ def _surface_depth(tris, best, tol, s):
     stack = np.empty((cap, 3, 3))
     g = np.zeros(3)
     for t in range(tris.shape[0]):
-        stack[0] = tris[t]
+        _copy_rows(stack[0], tris[t])
         top = 1
         while top > 0:
             top -= 1
             a = stack[top, 0].copy()
             b = stack[top, 1].copy()
             c = stack[top, 2].copy()
-            g[:] = (a + b + c) / 3.0
+            for i in range(3):
+                g[i] = (a[i] + b[i] + c[i]) / 3.0
             r = max(np.sqrt(((a - g) ** 2).sum()), np.sqrt(((b - g) ** 2).sum()), np.sqrt(((c - g) ** 2).sum()))
             d, f = _depth_face(g, s)
             if d > best:
@@ -101,24 +117,25 @@ def _surface_depth(tris, best, tol, s):
                 continue
             if top + 4 > cap:
                 grown = np.empty((2 * cap, 3, 3))
-                grown[:top] = stack[:top]
+                for i in range(top):
+                    _copy_rows(grown[i], stack[i])
                 stack = grown
                 cap *= 2
             ab = 0.5 * (a + b)
             bc = 0.5 * (b + c)
             ca = 0.5 * (c + a)
-            stack[top, 0] = a
-            stack[top, 1] = ab
-            stack[top, 2] = ca
-            stack[top + 1, 0] = ab
-            stack[top + 1, 1] = b
-            stack[top + 1, 2] = bc
-            stack[top + 2, 0] = ca
-            stack[top + 2, 1] = bc
-            stack[top + 2, 2] = c
-            stack[top + 3, 0] = ab
-            stack[top + 3, 1] = bc
-            stack[top + 3, 2] = ca
+            _copy(stack[top, 0], a)
+            _copy(stack[top, 1], ab)
+            _copy(stack[top, 2], ca)
+            _copy(stack[top + 1, 0], ab)
+            _copy(stack[top + 1, 1], b)
+            _copy(stack[top + 1, 2], bc)
+            _copy(stack[top + 2, 0], ca)
+            _copy(stack[top + 2, 1], bc)
+            _copy(stack[top + 2, 2], c)
+            _copy(stack[top + 3, 0], ab)
+            _copy(stack[top + 3, 1], bc)
+            _copy(stack[top + 3, 2], ca)
             top += 4
     return best
 
@@ -134,8 +151,8 @@ def _edge_depth(segments, ends, best, tol, s):
     stack = np.empty((cap, 2, 3))
     depth = np.empty((cap, 2))
     for t in range(segments.shape[0]):
-        stack[0] = segments[t]
-        depth[0] = ends[t]
+        _copy_rows(stack[0], segments[t])
+        _copy(depth[0], ends[t])
         top = 1
         while top > 0:
             top -= 1
@@ -153,15 +170,18 @@ def _edge_depth(segments, ends, best, tol, s):
                 continue
             if top + 2 > cap:
                 grown = np.empty((2 * cap, 2, 3))
-                grown[:top] = stack[:top]
-                stack = grown
                 grown_depth = np.empty((2 * cap, 2))
-                grown_depth[:top] = depth[:top]
+                for i in range(top):
+                    _copy_rows(grown[i], stack[i])
+                    _copy(grown_depth[i], depth[i])
+                stack = grown
                 depth = grown_depth
                 cap *= 2
-            stack[top, 0], stack[top, 1] = a, g
+            _copy(stack[top, 0], a)
+            _copy(stack[top, 1], g)
             depth[top, 0], depth[top, 1] = da, d
-            stack[top + 1, 0], stack[top + 1, 1] = g, b
+            _copy(stack[top + 1, 0], g)
+            _copy(stack[top + 1, 1], b)
             depth[top + 1, 0], depth[top + 1, 1] = d, db
             top += 2
     return best
@@ -225,7 +245,8 @@ def _ball_depth(points, normals, rmax, best, tol, own, other):
                 lo = mid
             else:
                 hi = mid
-        c[:] = p - lo * n
+        for i in range(3):
+            c[i] = p[i] - lo * n[i]
         inside = min(_depth(c, own), _depth(c, other))
         if inside > best:
             best = inside

@@ -297,8 +297,10 @@ def closest_on_triangle(p, corners, i):
 def distance_to_face(p, s, f):
     """mm from p (3,) to face f of the mesh `s`."""
     corners = np.empty((1, 3, 3))
-    for k in range(3):
-        corners[0, k] = s.vertices[s.faces[f, k]]
+    for k in range(3):  # element by element: a row assignment compiles numba's error-message path
+        v = s.faces[f, k]
+        for axis in range(3):
+            corners[0, k, axis] = s.vertices[v, axis]
     _, x, y, z = closest_on_triangle(p, corners, 0)
     return np.sqrt((p[0] - x) ** 2 + (p[1] - y) ** 2 + (p[2] - z) ** 2)
 
