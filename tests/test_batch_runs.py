@@ -198,17 +198,21 @@ def test_a_batch_killed_mid_run_resumes_without_redoing_finished_runs(case_file,
     try:
         deadline = time.monotonic() + 600
         while not first.exists() and time.monotonic() < deadline and proc.poll() is None:
-            time.sleep(0.2)
+            time.sleep(0.01)
         assert first.exists(), "the first run never finished"
     finally:
         os.killpg(proc.pid, signal.SIGKILL)  # the batch and its workers, mid-way through the second run
         proc.wait()
-    finished_at = first.stat().st_mtime_ns
-    assert not (out / vs[2].run_id / "run.json").exists()
+    # the runs finished when the batch was killed: the first, and (where the machine was quick
+    # enough to end the second in the moment the kill took) perhaps the second, never all three
+    finished = {v.run_id: (out / v.run_id / "run.json").stat().st_mtime_ns
+                for v in vs if (out / v.run_id / "run.json").exists()}
+    assert vs[0].run_id in finished and len(finished) < len(vs)
     done = subprocess.run(args, capture_output=True, text=True, env=env, timeout=600)
     assert done.returncode == 0, done.stderr
-    assert "batch: 3 runs, 3 ok (1 from an earlier run), 0 failed" in done.stdout
-    assert first.stat().st_mtime_ns == finished_at
+    assert f"batch: 3 runs, 3 ok ({len(finished)} from an earlier run), 0 failed" in done.stdout
+    for run_id, finished_at in finished.items():  # not run again
+        assert (out / run_id / "run.json").stat().st_mtime_ns == finished_at
     for v in vs:
         read_finished_run(out / v.run_id)
     assert leftovers(out) == []
