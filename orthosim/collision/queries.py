@@ -140,6 +140,12 @@ class ExactQueries:
         self._trees: dict[int, object] = {}
         self._world: OrderedDict[bytes, np.ndarray] = OrderedDict()
 
+    @property
+    def fcl_calls(self) -> int:
+        """FCL queries asked so far: distances and intersection tests (remembered answers, and
+        intersections an earlier distance proves false, cost none)."""
+        return self.queries + self.collides
+
     # ------------------------------------------------------------------ by FDI pair and poses
     def intersects(self, pair: tuple[int, int], poses: Mapping[int, np.ndarray]) -> bool:
         """Whether the two meshes' surfaces intersect at `poses`."""

@@ -65,7 +65,7 @@ class StageChecker:
     @property
     def fcl_queries(self) -> int:
         """FCL queries asked so far (distances and intersection tests; remembered answers not counted)."""
-        return self.queries.queries + self.queries.collides
+        return self.queries.fcl_calls
 
     def contacts(self, poses0: Mapping[int, np.ndarray], poses1: Mapping[int, np.ndarray],
                  pairs: Sequence[tuple[int, int]] | None = None) -> list[Contact]:

@@ -71,23 +71,20 @@ class PairMotion:
             return self.path_a.T1, self.path_b.T1
         return self.path_a.at(t), self.path_b.at(t)
 
-    def _fcl_calls(self) -> int:
-        return self.exact.queries + self.exact.collides
+    def _ask(self, question, t: float):
+        """One exact question (an `ExactQueries` method of two bodies' poses) at time t, its FCL calls counted."""
+        before = self.exact.fcl_calls
+        Ta, Tb = self._poses(t)
+        answer = question(self.i, Ta, self.j, Tb)
+        self.queries += self.exact.fcl_calls - before
+        return answer
 
     def intersects(self, t: float) -> bool:
-        before = self._fcl_calls()
-        Ta, Tb = self._poses(t)
-        hit = self.exact.body_intersects(self.i, Ta, self.j, Tb)
-        self.queries += self._fcl_calls() - before
-        return hit
+        return self._ask(self.exact.body_intersects, t)
 
     def distance(self, t: float) -> float:
         """mm between the meshes at time t (0.0 when they intersect)."""
-        before = self._fcl_calls()
-        Ta, Tb = self._poses(t)
-        d = self.exact.body_distance(self.i, Ta, self.j, Tb)
-        self.queries += self._fcl_calls() - before
-        return d
+        return self._ask(self.exact.body_distance, t)
 
 
 def min_clearance(motion: PairMotion, tolerance_mm: float = 1e-3, reach_mm: float = math.inf) -> Clearance:
