@@ -5,7 +5,6 @@ a traceback and never a different result."""
 from __future__ import annotations
 
 import json
-import os
 import random
 import warnings
 from dataclasses import dataclass
@@ -167,26 +166,23 @@ def test_any_damage_to_a_cache_entry_gives_the_clean_result_with_at_most_one_war
 
 
 @pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
-def test_a_nan_filled_dentition_entry_is_named_in_one_warning_rebuilt_and_the_run_is_the_clean_one(tmp_path):
+def test_a_nan_filled_dentition_entry_is_named_in_one_warning_rebuilt_and_the_run_is_the_clean_one(tmp_path, monkeypatch):
     """The issue's report, through `orthosim run`: every float array of the cached dentition filled
     with NaN; the run warns once, naming the entry, and writes the clean run's metrics byte for byte."""
     case = quick_case(tmp_path, steps=1)
     cache = tmp_path / "cache"
-    os.environ["ORTHOSIM_CACHE"] = str(cache)
-    try:
-        clean = run("run", case, "--out", tmp_path / "clean", "--no-render")
-        assert clean.returncode == 0, clean.stderr
-        (entry,) = (cache / "dentitions").glob("*.npz")
-        with np.load(entry) as z:
-            arrays = {k: z[k].copy() for k in z.files}
-        for a in arrays.values():
-            if a.dtype.kind == "f":
-                a[...] = np.nan
-        with open(entry, "wb") as fh:
-            np.savez(fh, **arrays)
-        damaged = run("run", case, "--out", tmp_path / "damaged", "--no-render")
-    finally:
-        del os.environ["ORTHOSIM_CACHE"]
+    monkeypatch.setenv("ORTHOSIM_CACHE", str(cache))
+    clean = run("run", case, "--out", tmp_path / "clean", "--no-render")
+    assert clean.returncode == 0, clean.stderr
+    (entry,) = (cache / "dentitions").glob("*.npz")
+    with np.load(entry) as z:
+        arrays = {k: z[k].copy() for k in z.files}
+    for a in arrays.values():
+        if a.dtype.kind == "f":
+            a[...] = np.nan
+    with open(entry, "wb") as fh:
+        np.savez(fh, **arrays)
+    damaged = run("run", case, "--out", tmp_path / "damaged", "--no-render")
     assert damaged.returncode == 0, damaged.stderr
     lines = damaged.stderr.strip().splitlines()
     assert lines == [f"orthosim: warning: dentition cache entry {entry} is damaged: checksum mismatch: "

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from cli_helpers import reaped
 from test_outputfolder import _earlier_run, _listing, tiny_disk  # noqa: F401 (fixture)
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -115,16 +116,12 @@ def test_sigterm_mid_run_stops_cleanly_with_143_and_leaves_the_earlier_run_whole
     _earlier_run(out, frames=500)
     before = _listing(out)
     proc = _start_rendered_run(quick_case(tmp_path), out)
-    try:
+    with reaped(proc):
         _wait_for_frames(proc, tmp_path)
         helpers = _descendants(proc.pid)
         assert helpers  # the simulation child and the video encoder
         proc.send_signal(signal.SIGTERM)
         _, stderr = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
     assert proc.returncode == 143
     assert stderr.strip().splitlines() == ["orthosim: terminated"]
     assert _listing(out) == before  # the earlier run, untouched: no new frame mixed in

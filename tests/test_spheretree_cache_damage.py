@@ -3,7 +3,6 @@ and two processes writing and reading one entry at once never see a partial file
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import textwrap
@@ -83,22 +82,19 @@ def test_a_damaged_entry_is_reported_in_one_warning_and_rebuilt(tmp_path, kind):
 
 
 @pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
-def test_a_run_with_a_damaged_cache_warns_once_and_matches_a_clean_run(tmp_path):
+def test_a_run_with_a_damaged_cache_warns_once_and_matches_a_clean_run(tmp_path, monkeypatch):
     """Through `orthosim run`: an empty entry is no abort, a non-finite one no silent wrong answer."""
     from test_run_lifecycle import quick_case, run
 
     case = quick_case(tmp_path, steps=1)
     env_cache = tmp_path / "cache"
-    os.environ["ORTHOSIM_CACHE"] = str(env_cache)
-    try:
-        clean = run("run", case, "--out", tmp_path / "clean", "--no-render")
-        assert clean.returncode == 0, clean.stderr
-        entries = sorted(env_cache.glob("*.npz"))
-        entries[0].write_bytes(b"")
-        _rewrite(entries[1], _nan_centre)
-        damaged = run("run", case, "--out", tmp_path / "damaged", "--no-render")
-    finally:
-        del os.environ["ORTHOSIM_CACHE"]
+    monkeypatch.setenv("ORTHOSIM_CACHE", str(env_cache))
+    clean = run("run", case, "--out", tmp_path / "clean", "--no-render")
+    assert clean.returncode == 0, clean.stderr
+    entries = sorted(env_cache.glob("*.npz"))
+    entries[0].write_bytes(b"")
+    _rewrite(entries[1], _nan_centre)
+    damaged = run("run", case, "--out", tmp_path / "damaged", "--no-render")
     assert damaged.returncode == 0, damaged.stderr
     lines = damaged.stderr.strip().splitlines()
     assert len(lines) == 2 and all(l.startswith("orthosim: warning: sphere-tree cache entry ") for l in lines), lines

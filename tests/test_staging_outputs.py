@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from cli_helpers import orthosim
+from cli_helpers import orthosim, reaped
 from orthosim.exchange.case import CASES_DIR, load_case
 from orthosim.geometry import meshquery
 from orthosim.geometry.motion import interpolate_pose
@@ -296,7 +296,6 @@ def test_stage_into_a_folder_another_run_holds_is_refused_in_one_line(diastema, 
 
 @pytest.mark.skipif(not hasattr(__import__("os"), "killpg"), reason="POSIX signals")
 def test_a_staging_stopped_mid_way_leaves_the_earlier_one_whole(diastema, tmp_path):
-    import os
     import signal
     import subprocess
     import sys
@@ -310,17 +309,13 @@ def test_a_staging_stopped_mid_way_leaves_the_earlier_one_whole(diastema, tmp_pa
     proc = subprocess.Popen([sys.executable, "-c", "from orthosim.cli import entry; entry()", "stage", str(DIASTEMA),
                              "--out", str(out), "--no-render"], cwd=ROOT, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
-    try:
+    with reaped(proc):
         deadline = time.monotonic() + 120
         while not list(tmp_path.glob(".o.orthosim-staging-*")) and time.monotonic() < deadline:
             time.sleep(0.05)
         assert list(tmp_path.glob(".o.orthosim-staging-*")), "the staging never started writing"
         proc.send_signal(signal.SIGTERM)
         _, stderr = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
     assert proc.returncode == 143, stderr
     assert _listing(out) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["o"]  # no private folder or lock left
