@@ -92,7 +92,7 @@ def render_backends(case: str | Path, size: tuple[int, int] = (640, 480), frames
     system libraries only (`glbackend.available_backends`): call it while this process holds no GL
     context, since the EGL probe initialises and terminates each device's display.
     """
-    from orthosim_render.glbackend import available_backends
+    from orthosim_render.offscreen_backend import available_backends
 
     labels = list(dict.fromkeys(b.label for b in available_backends()))
     children = []

@@ -13,7 +13,6 @@ import json
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
-import click
 import fcl
 import numpy as np
 
@@ -152,35 +151,3 @@ def collision_timings(dentition, poses: Mapping[int, np.ndarray] | None = None, 
             },
         },
     }
-
-
-# `orthosim collide bench`, added to the `collide` group by the CLI (orthosim/cli.py)
-@click.command("bench")
-@click.option("--out", "out_file", type=click.Path(path_type=Path), default=None, help="Also write the JSON here.")
-@click.option("--resolution", type=click.Choice(["coarse", "smooth"]), default="smooth", show_default=True,
-              help="Parametric model resolution.")
-@click.option("--repeats", type=click.IntRange(1), default=50, show_default=True)
-@click.option("--trees", type=click.Choice(["fit", "octree"]), default="fit", show_default=True,
-              help="Sphere-tree builder method (trees are cached on disk).")
-@click.option("--keep-freed-memory", is_flag=True, help="Tune glibc to keep freed memory (see collision.memory).")
-def bench_command(out_file: Path | None, resolution: str, repeats: int, trees: str, keep_freed_memory: bool) -> None:
-    """Microseconds per whole-arch step of every detector and of python-fcl, same pairs, one run."""
-    if keep_freed_memory:
-        from orthosim.collision.memory import keep_freed_memory as keep
-
-        keep()
-    from orthosim.model.parametric import parametric_dentition
-    from orthosim.spheretree.build import DEPTH, default_branching
-    from orthosim.spheretree.cache import cached_sphere_tree
-    from orthosim_bench.collision import collision_timings
-
-    res = collision_timings(parametric_dentition(resolution=resolution), repeats=repeats,
-                            tree_builder=lambda mesh: cached_sphere_tree(mesh, method=trees))
-    res["model"] = f"parametric {resolution}, {trees} sphere trees ({default_branching(trees)} x {DEPTH} levels)"
-    res["keep_freed_memory"] = keep_freed_memory
-    text = json.dumps(res, indent=1)
-    click.echo(text)
-    if out_file is not None:
-        from orthosim.storage.atomic import write_text
-
-        write_text(out_file, text)

@@ -3,7 +3,7 @@
 A golden is drawn as `orthosim_render.regression.render_case_frame` draws it: a fresh scene of the
 dentition in the step's state, drawn once from one camera preset at 320x240. Its labels (what each
 pixel shows and its depth) come from a second target of the same pass plus a legend
-(`orthosim_render.labels.render_labelled`). Measured here, on the goldens' own subjects (the normal
+(`orthosim_render.semantic_labels.render_labelled`). Measured here, on the goldens' own subjects (the normal
 occlusion in the five views, and case 1's last step with its ~1,100 contact spheres in the right
 buccal view):
   - golden_ms: scene built and drawn, colour read back (the baseline);
@@ -40,7 +40,7 @@ def _paired(first, second, rounds: int) -> tuple[float, float, float]:
 
 
 def _subject_times(dentition, state, view: str, size, rounds: int) -> dict:
-    from orthosim_render.labels import render_labelled
+    from orthosim_render.semantic_labels import render_labelled
     from orthosim_render.regression import _renderer, render_state
     from orthosim_render.scene import DentitionScene
 

@@ -377,7 +377,7 @@ def run_bench(case: str | Path | None = None, *, run_case=None, **options) -> di
     renderer = Renderer(plan.size)
     scene = DentitionScene(model.dentition, plan.size)
     gl = {"gl_renderer": renderer.gl_renderer, "gl_version": renderer.gl_version,
-          "gl_backend": renderer.backend.label}  # orthosim_render.glbackend: what drew every figure but render_backends
+          "gl_backend": renderer.backend.label}  # orthosim_render.offscreen_backend: what drew every figure but render_backends
     render_times = _render_alone(renderer, scene, states, plan.warmup)
     encode = ["MP4 encode (libx264 ultrafast)"] + (["PNG frames (orthosim_render.png)"] if plan.png else [])
     e2e_synthetic = _end_to_end(plan, model.dentition, (synthetic(i) for i in range(plan.n_states)))

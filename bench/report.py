@@ -18,7 +18,8 @@ from pathlib import Path
 
 from orthosim.exchange.case import CASES_DIR
 from orthosim.collision.detectors import PAPER_DETECTORS as DETECTORS
-from orthosim.runtime.runfolder import RunFolderError, file_sha256, read_finished_run
+from orthosim.runtime.runfolder import RunFolderError, read_finished_run
+from orthosim.storage.checksums import file_sha256
 
 PAPER_CASES = ("case1_first_premolar_extraction.toml", "case2_second_premolar_extraction.toml",
                "case3_incisor_space_closure.toml")

@@ -8,7 +8,7 @@ compared with the real tooth in the arch frame (mm, degrees):
   root_length_mm       estimated minus real root length (CEJ to apex along the long axis)
   axis_deg             angle between the two meshes' principal axes (`meshload.principal_long_axis`),
                        so a root bent away from the crown's axis counts, whatever frame was used
-  resistance_mm        distance between the centres of resistance (`orthosim.movement.resistance`, literature rule)
+  resistance_mm        distance between the centres of resistance (`orthosim.mechanics.resistance`, literature rule)
 Measurement, not product: the CLI's bench and the tests call it, the product never does.
 """
 
@@ -21,7 +21,7 @@ import numpy as np
 from orthosim.exchange.meshload import ToothAxes, principal_long_axis, tooth_from_mesh
 from orthosim.model import fdi as fdi_mod
 from orthosim.model.rootsynthesis import synthesize_root
-from orthosim.movement.resistance import center_of_resistance
+from orthosim.mechanics.resistance import center_of_resistance
 from orthosim_bench.scanarch import crown_at_cej
 
 

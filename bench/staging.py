@@ -37,7 +37,7 @@ def verify_timing(work_dir) -> dict:
 
     from orthosim.model.parametric import parametric_dentition
     from orthosim.staging.chart import write_outputs
-    from orthosim.staging.commands import plan_case
+    from orthosim.staging.caseplan import plan_case
     from orthosim.staging.verify import load_for_verify, verify_staging
 
     work_dir = Path(work_dir)
@@ -73,7 +73,7 @@ def verify_timing(work_dir) -> dict:
 def big_setup(dentition):
     """(start, target) poses: every tooth of a 28-tooth dentition moving, lower bound 30 stages."""
     from orthosim.model import fdi as F
-    from orthosim.staging.target import ToothMovement, target_pose
+    from orthosim.exchange.target import ToothMovement, target_pose
 
     start = dentition.rest_poses()
     target = {}
@@ -88,7 +88,7 @@ def staging_timings() -> dict:
     from orthosim.exchange.case import CASES_DIR
     from orthosim.collision import CollisionModel
     from orthosim.model.parametric import parametric_dentition
-    from orthosim.staging.commands import plan_case
+    from orthosim.staging.caseplan import plan_case
     from orthosim.staging.plan import plan_staging
 
     load = os.getloadavg()

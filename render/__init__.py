@@ -1,5 +1,20 @@
 """Everything that draws or writes images, video and reports for orthosim (installed as `orthosim_render`).
 
 Importing this package changes nothing in the process: the OpenGL backend (EGL or OSMesa) is chosen
-when something first draws, in `orthosim_render.glbackend`, and only then is PYOPENGL_PLATFORM set.
+when something first draws, in `offscreen_backend`, and only then is PYOPENGL_PLATFORM set.
+
+- Drawing: `offscreen_backend` (which backend, probed through ctypes before PyOpenGL loads),
+  `pyrender_setup` (pyrender loaded with the fixes it needs headless), `scene` (the scene built once
+  from a dentition, updated per frame), `renderer` and `lean_renderer` (the context and the draw
+  loop), `cameras` (the five named views), `cej` (crown and root split at the CEJ for colouring),
+  `standin` (simple shapes for what has no mesh), `spheretree_view` (sphere trees drawn).
+- Frames and video: `frame_state` (what one frame shows), `timeline` (frames from step records),
+  `overlay` (case, day counter, legend, FDI labels), `animation` (frames, MP4, GIF, the run's
+  drawing), `png` (fast PNG writing), `cputime` (CPU per frame of every thread and child).
+- Pictures and pages: `occlusion_figure` (occlusal contacts drawn), `staging` and `staging_page`
+  (a staging's animation and page), `evidence_page` (the evidence table's page), `report/` (the
+  contact-area report).
+- Image regression: `imgdiff` (a render against its golden), `imageerrors` (its one-line errors),
+  `regression` (a case's step drawn for a test), `semantic_labels` (what each pixel shows), `explain`
+  (what changed, tooth by tooth), `pytest_plugin` (the `orthosim_image_regression` fixture).
 """

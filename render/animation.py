@@ -434,7 +434,7 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
         "views": list(views),
         "size": list(size),
         "gl_renderer": gl_renderer,
-        "gl_backend": gl_backend,  # orthosim_render.glbackend: egl/gpu, egl/software, egl/default or osmesa
+        "gl_backend": gl_backend,  # orthosim_render.offscreen_backend: egl/gpu, egl/software, egl/default or osmesa
         "video_fps": fps,
         "encode_s": encode_s,
         "overlay": None if caption is None else {"labels": caption.labels},

@@ -4,7 +4,7 @@ The page has one section per row: source and exact figure, what was measured and
 force system, the published mean and interval, the simulated value, inside or outside (with the
 row's one-line reason when outside), and a plot (matplotlib, embedded as a PNG data URI, so the
 page opens anywhere without its folder). The rows themselves are run by
-`orthosim.analysis.evidence`; this module only draws and writes.
+`orthosim.evidence`; this module only draws and writes.
 """
 
 from __future__ import annotations
@@ -15,9 +15,7 @@ import json
 import math
 from pathlib import Path
 
-import click
-
-from orthosim.analysis.evidence import RowResult, load_evidence, run_rows
+from orthosim.evidence import RowResult
 from orthosim.storage.atomic import write_text
 
 _PAGE = """<!doctype html>
@@ -153,30 +151,13 @@ def write_evidence(results: list[RowResult], folder: Path, law_name: str, law_te
     write_text(folder / "index.html", html)
 
 
-@click.command("evidence")
-@click.option("--out", "out_dir", required=True, type=click.Path(path_type=Path),
-              help="Folder for evidence.json and index.html (new, or one an earlier evidence run wrote).")
-@click.option("--parameters", type=click.Choice(["clinical", "paper"]), default="clinical", show_default=True,
-              help="Rate-law parameter set to test.")
-@click.option("--no-real", is_flag=True, help="Skip the rows on the real patient's teeth (../shared/data).")
-def evidence_command(out_dir: Path, parameters: str, no_real: bool) -> None:
-    """Run the clinical evidence table on the model; write evidence.json and index.html."""
-    from orthosim.analysis.evidence.run import evidence_bench
-    from orthosim.movement.biomechanics import DAYS_PER_MONTH, PARAMETER_SETS
-    from orthosim.runtime.outputfolder import output_folder
-
-    law = PARAMETER_SETS[parameters]
-    rows = load_evidence()
-    with output_folder(out_dir) as staging:
-        results = run_rows(evidence_bench(law, not no_real), rows)
-        text = (f"threshold {law.threshold_cN:g} cN, saturation {law.saturation_cN:g} cN, "
-                f"{law.max_rate_mm_per_day * DAYS_PER_MONTH:.3g} mm/month, mandibular bone factor {law.mandibular_bone_factor:g}")
-        write_evidence(results, staging, parameters, text)
+def outcome_lines(results: list[RowResult], law_name: str, page: Path) -> list[str]:
+    """What `orthosim evidence` prints: the count of rows inside, then one line per row outside with its reason."""
     inside = sum(r.inside for r in results)
-    click.echo(f"{inside} of {len(results)} evidence rows inside their published interval "
-               f"({sum(r.status == 'skipped' for r in results)} skipped); page: {out_dir / 'index.html'}")
+    lines = [f"{inside} of {len(results)} evidence rows inside their published interval "
+             f"({sum(r.status == 'skipped' for r in results)} skipped); page: {page}"]
     for r in results:
         if r.status == "outside":
-            click.echo(f"  outside: {r.row.id}: {_fmt(r.value)} {r.row.unit} not in [{r.row.low:g}, {r.row.high:g}]: "
-                       f"{_reason(r, parameters)}")
-
+            lines.append(f"  outside: {r.row.id}: {_fmt(r.value)} {r.row.unit} not in [{r.row.low:g}, {r.row.high:g}]: "
+                         f"{_reason(r, law_name)}")
+    return lines

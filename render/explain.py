@@ -1,6 +1,6 @@
 """What changed between a golden and a candidate render, said tooth by tooth and contact by contact.
 
-Both images carry their `LabelFrame` (orthosim_render.labels: what each pixel shows, and its
+Both images carry their `LabelFrame` (orthosim_render.semantic_labels: what each pixel shows, and its
 depth). For everything either frame shows (a tooth, the contact patch between two teeth, ...):
   - moved: the shift (column, row) that lays its pixels in the golden onto those in the candidate,
     first to the pixel by cross-correlating the two masks, then below a pixel by matching the two
@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from orthosim_render.labels import LabelEntry, LabelFrame, dental_terms
+from orthosim_render.semantic_labels import LabelEntry, LabelFrame, dental_terms
 
 DEPTH_EPS_MM = 0.05  # depths closer than this are the same surface (24-bit depth, another Mesa build)
 MIN_CHANGED_PX = 4  # fewer unexplained pixels than this (and than 1 % of the thing) are edge noise
@@ -157,7 +157,7 @@ def check_tolerances(ignore, max_shift_px) -> tuple:
     from orthosim.model.fdi import is_fdi
 
     from orthosim_render.imageerrors import ImageInputError
-    from orthosim_render.labels import KINDS
+    from orthosim_render.semantic_labels import KINDS
 
     if isinstance(ignore, (str, int)):
         ignore = (ignore,)

@@ -5,7 +5,7 @@ builds. So a golden PNG carries a sidecar (`GOLDEN.json`: the offscreen backend,
 and Mesa version it was drawn with, its size, camera view, orthosim version, case file hash and
 frame index), and the comparison picks its mode from it:
   - exact: the candidate was drawn through the same backend (EGL device kind or OSMesa,
-    `orthosim_render.glbackend`), GL renderer and Mesa version as the golden; any pixel that differs
+    `orthosim_render.offscreen_backend`), GL renderer and Mesa version as the golden; any pixel that differs
     is a failure (a sidecar written before orthosim drew through EGL names no backend: OSMesa drew it);
   - tolerance: otherwise (or when either side's GL is unknown); a pixel differs when one of its
     channels is off by more than `max_level` levels (default 3), and the images match while at
@@ -162,10 +162,10 @@ def read_png(path: str | Path, role: str = "image") -> np.ndarray:
 def write_golden(png: str | Path, image: np.ndarray, sidecar: GoldenSidecar, labels=None) -> None:
     """Write `image` as the golden PNG and its sidecar, each atomically (zlib level 9: goldens are committed).
 
-    `labels`: the image's `orthosim_render.labels.LabelFrame`, written beside it; None removes any
+    `labels`: the image's `orthosim_render.semantic_labels.LabelFrame`, written beside it; None removes any
     label files left from an earlier golden (they would describe other pixels).
     """
-    from orthosim_render.labels import remove_labels, write_labels
+    from orthosim_render.semantic_labels import remove_labels, write_labels
 
     image = np.ascontiguousarray(image, dtype=np.uint8)
     if labels is not None:
@@ -416,12 +416,12 @@ def imgdiff(golden_path: str | Path, candidate_path: str | Path, *, diff_path: s
     a candidate without a sidecar was normally just rendered here. The diff image is written to
     `diff_path` when given, else beside the candidate when the images differ. `update` makes the
     candidate the golden (PNG, sidecar and labels), reporting what the comparison found first.
-    When both images carry labels (`orthosim_render.labels`) and differ, the outcome also says what
+    When both images carry labels (`orthosim_render.semantic_labels`) and differ, the outcome also says what
     changed, thing by thing (`orthosim_render.explain`), and DIFF.json beside the diff image holds the
     same; a label file that is damaged or belongs to other pixels is refused (ImageInputError), never
     half-used.
     """
-    from orthosim_render.labels import read_labels
+    from orthosim_render.semantic_labels import read_labels
 
     golden_path, candidate_path = Path(golden_path), Path(candidate_path)
     candidate = read_png(candidate_path, "candidate")

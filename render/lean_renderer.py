@@ -7,7 +7,7 @@ machine. Here a frame costs a fixed ~20 calls plus 4 per visible node (model mat
 factor, vertex array, draw). Uniform locations are cached per program. Only what our scenes
 use is supported: opaque triangle primitives without textures, directional lights, our shaders.
 
-Imported only by `orthosim_render.renderer.Renderer`, after `orthosim_render.gl.load_pyrender` has chosen
+Imported only by `orthosim_render.renderer.Renderer`, after `orthosim_render.pyrender_setup.load_pyrender` has chosen
 the GL platform (PyOpenGL fixes it at its first import).
 """
 
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from orthosim_render.gl import load_pyrender
+from orthosim_render.pyrender_setup import load_pyrender
 
 pyrender = load_pyrender()
 from OpenGL import GL  # noqa: E402 (after load_pyrender: it chooses the platform PyOpenGL loads)

@@ -18,7 +18,7 @@ lists every golden rewritten. Override the `orthosim_golden_dir` fixture (in a c
 module) to keep goldens elsewhere. On a failure the candidate and the diff image are written into
 the test's tmp_path and named in the assertion message.
 
-Semantic goldens: a `RenderedFrame` carries what each pixel shows (`orthosim_render.labels`); the
+Semantic goldens: a `RenderedFrame` carries what each pixel shows (`orthosim_render.semantic_labels`); the
 golden keeps it beside its PNG, and a failure then says what changed, tooth by tooth
 (`orthosim_render.explain`), e.g. `tooth 13 moved 2.1 px (0.40 mm) distally; 27 other teeth
 unchanged`. `check(frame, ignore=["gingiva", 13], max_shift_px=1)` leaves those things' pixels out
@@ -171,7 +171,7 @@ class ImageRegression:
         import numpy as np
 
         from orthosim_render import imgdiff
-        from orthosim_render.labels import read_labels
+        from orthosim_render.semantic_labels import read_labels
         from orthosim_render.regression import RenderedFrame, gl_identity
 
         labels = None
@@ -189,7 +189,7 @@ class ImageRegression:
     @staticmethod
     def _golden(golden: Path):
         from orthosim_render import imgdiff
-        from orthosim_render.labels import read_labels
+        from orthosim_render.semantic_labels import read_labels
 
         reference = imgdiff.read_png(golden, "golden")
         return reference, read_labels(golden, reference)
@@ -202,7 +202,7 @@ class ImageRegression:
         from orthosim.storage.atomic import write_bytes
 
         from orthosim_render import imgdiff
-        from orthosim_render.labels import write_labels
+        from orthosim_render.semantic_labels import write_labels
         from orthosim_render.png import encode_png
 
         obtained = self._tmp_path / f"{golden.stem}.obtained.png"

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from orthosim import __version__
-from orthosim.runtime.runfolder import file_sha256
+from orthosim.storage.checksums import file_sha256
 
 from orthosim_render.imgdiff import GoldenSidecar
 
@@ -33,7 +33,7 @@ DEFAULT_SIZE = (320, 240)
 @dataclass(frozen=True, eq=False)
 class RenderedFrame:
     """A rendered image, (h, w, 3) uint8 RGB, what identifies it (`sidecar`) and what each pixel shows
-    (`labels`, an `orthosim_render.labels.LabelFrame`, or None); usable as an array."""
+    (`labels`, an `orthosim_render.semantic_labels.LabelFrame`, or None); usable as an array."""
 
     image: np.ndarray
     sidecar: GoldenSidecar
@@ -69,7 +69,7 @@ def gl_identity() -> GoldenSidecar:
 
 def this_machine_gl() -> GoldenSidecar | None:
     """`gl_identity()`, or None when no offscreen context can start here (the comparison then uses tolerance)."""
-    from orthosim_render.gl import RenderSetupError
+    from orthosim_render.pyrender_setup import RenderSetupError
 
     try:
         return gl_identity()
@@ -89,7 +89,7 @@ def render_state(dentition, state, view: str = "frontal", size: tuple[int, int] 
     scene.update(state)
     renderer = _renderer((int(size[0]), int(size[1])))
     if labels:
-        from orthosim_render.labels import render_labelled
+        from orthosim_render.semantic_labels import render_labelled
 
         return render_labelled(renderer, scene, view)
     return renderer.render(scene, view)
@@ -157,7 +157,7 @@ def render_case_frame(case_file: str | Path, step: int = -1, view: str = "fronta
     Contact markers are drawn (`contacts=False` leaves them out); `detector` defaults to the case's.
     The frame's sidecar names this process's backend, GL renderer and Mesa version, the size, view, case
     file name and SHA-256 and the step, as `orthosim imgdiff` and the pytest fixture expect. With
-    `labels` (the default) the frame also carries what each pixel shows (`orthosim_render.labels`),
+    `labels` (the default) the frame also carries what each pixel shows (`orthosim_render.semantic_labels`),
     drawn in the same pass, so that a failing check can say which tooth changed and how.
     """
     from orthosim_render.cameras import check_view

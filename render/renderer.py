@@ -1,4 +1,4 @@
-"""The renderer: owns the offscreen OpenGL context (EGL or OSMesa, `orthosim_render.glbackend`) and turns a `DentitionScene` into pixels.
+"""The renderer: owns the offscreen OpenGL context (EGL or OSMesa, `orthosim_render.offscreen_backend`) and turns a `DentitionScene` into pixels.
 
 Drawing goes through a subclass of pyrender's `Renderer` (pyrender still owns meshes, buffers and
 the shader cache); each change below is measured by `orthosim bench` (bench/render.py,
@@ -25,7 +25,7 @@ import weakref
 
 import numpy as np
 
-from orthosim_render.gl import load_pyrender, offscreen_platform, shader_dir
+from orthosim_render.pyrender_setup import load_pyrender, offscreen_platform, shader_dir
 
 
 
@@ -119,7 +119,7 @@ class Renderer:
 
     def render_labelled(self, scene, node_labels: dict, view: str | None = None):
         """Draw `scene` as `render` does and, in the same pass, what each pixel shows (semantic goldens,
-        `orthosim_render.labels`): returns (image as `render` returns it, labels (h, w) uint16, depth
+        `orthosim_render.semantic_labels`): returns (image as `render` returns it, labels (h, w) uint16, depth
         (h, w) float32 window depth in [0, 1], 1.0 where nothing is drawn), top row first.
 
         `node_labels`: pyrender node -> label id (1-65535); contact sprites carry their own ids in

@@ -28,7 +28,7 @@ from orthosim.model.tooth import CROWN, ROOT
 from orthosim_render.cej import CejCut, cut_at_cej, vertex_blend
 from orthosim_render.cameras import VIEW_NAMES, CameraView, check_view, frame_view
 from orthosim_render.frame_state import FrameState
-from orthosim_render.gl import load_pyrender
+from orthosim_render.pyrender_setup import load_pyrender
 
 # Colours, linear RGB in [0, 1]; chosen for clinicians: ivory enamel, roots clearly paler and
 # cooler than crowns, moving teeth a distinct mint, contacts a saturated red-magenta that no

@@ -22,9 +22,9 @@ IPR_MARKER_RADIUS_MM = 0.2  # contact points have no size; drawn as spheres of t
 
 
 def staging_frames(run, frames_per_stage: int = 6) -> Iterator[FrameState]:
-    """FrameStates of a `orthosim.staging.commands.StagingRun`: stage 0, then `frames_per_stage`
+    """FrameStates of a `orthosim.staging.caseplan.StagingRun`: stage 0, then `frames_per_stage`
     frames per stage, the last of each at the stage's poses."""
-    from orthosim.staging.commands import ipr_contact_points
+    from orthosim.staging.caseplan import ipr_contact_points
 
     plan, dent = run.plan, run.dentition
     extracted = frozenset(n for n in dent.fdis if n not in plan.teeth)

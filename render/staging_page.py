@@ -28,7 +28,7 @@ import numpy as np
 from orthosim import __version__
 from orthosim.model import fdi as F
 from orthosim.staging.chart import movement_table, staging_chart
-from orthosim.staging.target import COMPONENTS, UNITS
+from orthosim.exchange.target import COMPONENTS, UNITS
 from orthosim.storage.atomic import write_bytes, write_text
 
 DPI = 110

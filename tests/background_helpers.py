@@ -1,4 +1,4 @@
-"""Sequences that `tests/test_background.py` has a child process produce: module-level, so that they
+"""Sequences that `tests/runtime/test_background.py` has a child process produce: module-level, so that they
 pickle by name, in a module that imports little, so that the child starts quickly."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Run functions that `tests/test_batch_runs.py` hands to batch workers in place of `orthosim.cli.run_case`:
+"""Run functions that `tests/batch/test_batch_runs.py` hands to batch workers in place of `orthosim.cli.run.run_case`:
 module-level, so that they pickle by name to worker processes and Dask workers. Each misbehaves
 for the runs named in its options (`fail_runs`), so one batch can hold good and bad runs."""
 
@@ -35,7 +35,7 @@ RENDER = {"size": (48, 32), "frames_per_step": 1, "views": ("frontal",), **ONE_C
 
 
 def _real(case_path, out_dir, detector, opts):
-    from orthosim.cli import run_case
+    from orthosim.cli.run import run_case
 
     return run_case(case_path, out_dir, detector, {k: v for k, v in opts.items() if k not in ("fail_runs", "marker")})
 

@@ -9,14 +9,47 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parent.parent  # the repository (tests/ is one level down)
+
+
+QUICK_CASE = """
+[case]
+name = "quick"
+[model]
+kind = "parametric"
+resolution = "coarse"
+[treatment]
+extractions = [14, 24, 34, 44]
+duration_days = {days}
+step_days = 30
+detector = "continuous"
+[wire]
+type = "rectangular"
+[[loads]]
+teeth = [16, 26, 36, 46]
+force_cN = 150
+direction = "mesial"
+point = "bracket"
+movement = "translation"
+"""
+
+
+def quick_case(folder: Path, steps: int = 20) -> Path:
+    """A small case file in `folder` (coarse parametric teeth, 30-day steps, `steps` of them): quick.toml."""
+    path = folder / "quick.toml"
+    path.write_text(QUICK_CASE.format(days=30 * steps))
+    return path
+
+
+def orthosim_args(*args) -> list[str]:
+    """The argument list that starts `orthosim ARGS...` in a child Python, through the console entry."""
+    return [sys.executable, "-c", "from orthosim.cli import entry; entry()", *map(str, args)]
 
 
 def orthosim(*args, cwd=ROOT, timeout: float = 600) -> subprocess.CompletedProcess:
     """`orthosim ARGS...` through the console entry (one-line errors, exit codes), output captured."""
     env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa"}
-    return subprocess.run([sys.executable, "-c", "from orthosim.cli import entry; entry()", *map(str, args)],
-                          cwd=cwd, capture_output=True, text=True, env=env, timeout=timeout)
+    return subprocess.run(orthosim_args(*args), cwd=cwd, capture_output=True, text=True, env=env, timeout=timeout)
 
 
 @contextmanager

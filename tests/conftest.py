@@ -16,12 +16,12 @@ from pathlib import Path
 import pytest
 
 from orthosim.exchange.shareddata import OPEN_FULL_JAW, shared_data_dir
-from orthosim_render.glbackend import ENV, probe_osmesa
+from orthosim_render.offscreen_backend import ENV, probe_osmesa
 
 # The goldens (tests/golden/) were drawn through OSMesa, and a golden is compared exactly only with
 # frames drawn through its own backend: where OSMesa is present, the suite draws through it (unless
 # ORTHOSIM_GL says otherwise), else through `auto`'s EGL, the goldens then compared within tolerance.
-# tests/test_gl_backends.py draws through each backend in child processes.
+# tests/render/test_gl_backends.py draws through each backend in child processes.
 if not os.environ.get(ENV) and not os.environ.get("PYOPENGL_PLATFORM") and probe_osmesa():
     os.environ[ENV] = "osmesa"
 
@@ -32,7 +32,7 @@ _REAL_DATA = shared_data_dir() / OPEN_FULL_JAW
 FAST_TEST_BUDGET_S = 2.0
 _fast_seconds: dict[str, float] = {}
 _outcomes: dict[str, str] = {}
-_damaged_entries: dict[str, int] = {}  # kind of cache entry -> damaged copies a test loaded (tests/test_damaged_entries.py)
+_damaged_entries: dict[str, int] = {}  # kind of cache entry -> damaged copies a test loaded (tests/storage/test_damaged_entries.py)
 
 
 @pytest.fixture

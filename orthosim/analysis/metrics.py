@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from orthosim.model.dentition import Dentition
-from orthosim.analysis.occlusion import molar_relation, overbite, overjet
+from orthosim.model.occlusion import molar_relation, overbite, overjet
 
 Poses = dict[int, np.ndarray]
 

@@ -107,7 +107,7 @@ def occlusion_record(dent: Dentition, contacts: list[OcclusalContact] | None = N
     (mm), Bolton ratios (%), and the facing pairs in contact with their areas."""
     from orthosim.model.fdi import QUADRANTS
     from orthosim.analysis.metrics import occlusion_summary
-    from orthosim.analysis.occlusion import bolton_ratios
+    from orthosim.model.occlusion import bolton_ratios
 
     contacts = occlusal_contacts(dent) if contacts is None else contacts
     complete = all(10 * q + p in dent.teeth for q in QUADRANTS for p in range(1, 7))

@@ -21,7 +21,7 @@ import numpy as np
 
 from orthosim.model.dentition import Dentition
 from orthosim.model.fdi import Arch
-from orthosim.analysis.occlusion import mesiodistal_width
+from orthosim.model.occlusion import mesiodistal_width
 
 GAP_THRESHOLD_MM = 1.0  # a gap over 1 mm between neighbours cannot be neglected in practice (the paper)
 

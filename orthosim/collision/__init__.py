@@ -3,14 +3,15 @@
     model = CollisionModel.from_dentition(dentition)          # built once: trees, circles, meshes
     result = detect_step(model, poses_start, poses_end, detector="continuous")
 
-Modules: `contract` (request and result types), `model` (what never changes), `broadphase`
-(which pairs to test), `circles` (detector 1), `discrete` (detector 2), `continuous` (detector 3),
-`descent` (the shared vectorised tree descent), `time_of_contact` (Eq. 2 and step bounds),
+Modules: `contract` (request and result types), `detectors` (each detector as an object with its
+capabilities), `model` (what never changes), `broadphase` (which pairs to test), `circles`
+(detector 1), `discrete` (detector 2), `continuous` (detector 3), `descent` (the shared vectorised
+tree descent) and `descent_compiled` (its numba form), `time_of_contact` (Eq. 2 and step bounds),
 `queries` (a run's exact answers on the meshes, through `orthosim.geometry.meshquery`), `detect`
-(the entry points: `detect_step`, `contacts`), `bench` (timings), `validate` (accuracy studies),
-`memory` (a process-wide allocator setting worth making at the CLI entry), `commands` (`orthosim
-collide ...`). How a tooth moves within a step (the
-motion every detector assumes) is `orthosim.geometry.motion`.
+(the entry points: `detect_step`, `contacts`), `contact_area` (the exact contact faces inside
+overlapping leaves), `interpenetration` (what a model's teeth overlap at rest), `validate`
+(accuracy studies). How a tooth moves within a step (the motion every detector assumes) is
+`orthosim.geometry.motion`; the detector timings are `orthosim_bench.collision`.
 """
 
 # The package's names, imported on first use (PEP 562): `orthosim.collision.detectors` is read by

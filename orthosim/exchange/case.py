@@ -22,7 +22,7 @@ from orthosim.model import fdi as F
 from orthosim.collision.detectors import DETECTORS
 from orthosim.errors import CaseError
 from orthosim.exchange.casefields import FieldReader, teeth_list
-from orthosim.staging.target import CaseStaging, read_case_staging
+from orthosim.exchange.target import CaseStaging, read_case_staging
 
 
 def _cases_dir() -> Path:
@@ -115,7 +115,7 @@ class Simulation:
 
 @dataclass(frozen=True)
 class Biomechanics:
-    """The rate law's constants ([biomechanics] table; see `orthosim.movement.biomechanics`).
+    """The rate law's constants ([biomechanics] table; see `orthosim.mechanics.biomechanics`).
 
     parameters: the named set the table starts from: "paper" (the paper's replication values, the
     default, so cases written before the table keep their numbers) or "clinical" (fitted to the
@@ -326,7 +326,7 @@ def load_case(path: str | Path) -> Case:
 
 
 def _read_biomechanics(r: FieldReader) -> Biomechanics:
-    from orthosim.movement.ratelaw import PARAMETER_SETS
+    from orthosim.mechanics.ratelaw import PARAMETER_SETS
 
     parameters = r.string("parameters", "paper", tuple(PARAMETER_SETS))
     values = {}

@@ -1,7 +1,7 @@
 """Typed reading of one TOML table of a case file: every problem names the file, the dotted field and the fix.
 
 Shared by the case file's sections (`orthosim.exchange.case`) and the staging set-up's
-(`orthosim.staging.target`), so every field of a case reads and fails the same way.
+(`orthosim.exchange.target`), so every field of a case reads and fails the same way.
 """
 
 from __future__ import annotations

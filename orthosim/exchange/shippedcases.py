@@ -1,5 +1,5 @@
 """The case files orthosim ships (`CASES_DIR`: the checkout's `cases/`, or `orthosim/cases/` in an
-installed wheel), listed and copied by `orthosim cases`, so that a user who installed orthosim with
+installed wheel), listed and copied by `orthosim cases` (`orthosim.cli.cases`), so that a user who installed orthosim with
 pip can see what there is and start from a copy of their own.
 
 Each case is read with the same reader as `orthosim run` (`load_case`), so the list shows what a
@@ -12,8 +12,6 @@ from __future__ import annotations
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-
-import click
 
 from orthosim.errors import CaseError
 
@@ -71,26 +69,3 @@ def copy_shipped_case(name: str, dest: Path) -> Path:
         raise CaseError(target, None, "already exists", "give another folder or file name, or remove it first")
     write_text(target, case.path.read_text())
     return target
-
-
-@click.command("cases")
-@click.option("--copy", "copy", nargs=2, default=None, metavar="NAME DEST",
-              help="Copy shipped case NAME into folder DEST (or to DEST when it ends in .toml) to start from.")
-def cases(copy: tuple[str, str] | None) -> None:
-    """List the case files shipped with orthosim, or copy one to start from."""
-    if copy:
-        name, dest = copy
-        target = copy_shipped_case(name, Path(dest))
-        note = (" (its teeth are read from mesh folders named relative to the file: edit [model] folder)"
-                if find_shipped_case(name).needs_data else "")
-        click.echo(f"copied {name} -> {target}{note}; run it with: orthosim run {target}")
-        return
-    rows = shipped_cases()
-    width = max((len(c.name) for c in rows), default=0)
-    for c in rows:
-        data = " [needs the Open-Full-Jaw data]" if c.needs_data else ""
-        span = f" ({c.duration_days:g} days)" if c.duration_days else ""  # staging cases: a set-up, no treatment time
-        click.echo(f"{c.name:<{width}}  {c.title}{span}{data}")
-    from orthosim.exchange.case import CASES_DIR
-
-    click.echo(f"{len(rows)} cases in {CASES_DIR}; copy one with: orthosim cases --copy NAME DIR")

@@ -37,7 +37,7 @@ BUILDER_VERSION = 1
 ENTRY_KIND = "dentition"
 # Modules whose code decides what a built dentition holds: their source is part of the key.
 _BUILDER_MODULES = ("model/anatomy", "model/archform", "model/dentition", "model/fdi", "collision/interpenetration",
-                    "exchange/meshload", "exchange/meshfolder", "geometry/meshrefine", "analysis/occlusion", "exchange/openfulljaw",
+                    "exchange/meshload", "exchange/meshfolder", "geometry/meshrefine", "model/occlusion", "exchange/openfulljaw",
                     "model/parametric", "exchange/scanfolders", "exchange/scanframe", "model/tooth", "model/toothshape",
                     "geometry/meshquery", "geometry/penetration", "geometry/signeddistance",
                     "model/rootsynthesis", "exchange/labelledscan", "geometry/meshcut")

@@ -29,7 +29,7 @@ from orthosim.model import fdi as F
 from orthosim.model.anatomy import dimensions
 from orthosim.model.archform import BetaArch, arch_with_half_length
 from orthosim.model.dentition import Dentition
-from orthosim.analysis.occlusion import molar_relation, overjet
+from orthosim.model.occlusion import molar_relation, overjet
 from orthosim.model.tooth import CROWN, Tooth, part_of_faces
 
 if TYPE_CHECKING:  # imported where the model is built: a cached model needs neither FCL nor numba

@@ -22,7 +22,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from orthosim.movement.vec import length
+from orthosim.mechanics.vec import length
 
 
 @dataclass(frozen=True, eq=False)

@@ -47,7 +47,7 @@ from orthosim.model.fdi import Arch, arch_of
 from orthosim.storage.atomic import atomic_path, to_jsonable, write_json, write_text
 from orthosim.geometry.motion import rotation_angle
 from orthosim.collision.interpenetration import start_depths
-from orthosim.movement.biomechanics import movement_type
+from orthosim.mechanics.biomechanics import movement_type
 from orthosim.movement.simulation import MovementModel, StepRecord
 
 

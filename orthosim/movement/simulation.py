@@ -60,12 +60,12 @@ from orthosim.collision.detectors import DETECTORS, Detector, detector_named
 from orthosim.errors import CaseError
 from orthosim.collision.interpenetration import default_occlusal_slide_mm
 from orthosim.analysis.metrics import tooth_to_tooth_distances
-from orthosim.movement.biomechanics import (DAYS_PER_MONTH, PARAMETER_SETS, Motion, RateLaw, ToothMechanics, build_mechanics,
+from orthosim.mechanics.biomechanics import (DAYS_PER_MONTH, PARAMETER_SETS, Motion, RateLaw, ToothMechanics, build_mechanics,
                                            tooth_motion)
 from orthosim.movement.impact import Body, impact
 from orthosim.movement.propagation import ForceBalance, propagate
 from orthosim.movement.records import BiteRecord, CollisionEvent, StepRecord
-from orthosim.movement.vec import length
+from orthosim.mechanics.vec import length
 
 @dataclass(frozen=True)
 class MovementSettings:

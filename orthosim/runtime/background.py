@@ -36,7 +36,7 @@ same message (an `OrthosimError` stays one, and the CLI prints it as one line); 
 without a word (killed, crashed) is reported as a `ChildProcessError`. Shutdown: leaving the `with`
 block, `close()`, or exhausting the iterator stops the child and waits for it, so no process is
 left behind; Ctrl-C is left to this process (the child ignores SIGINT and is stopped by `close`).
-If this process is killed outright, the child ends with it (`orthosim.runtime.lifeline.exit_with_parent`).
+If this process is killed outright, the child ends with it (`orthosim.system.lifeline.exit_with_parent`).
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ import threading
 import warnings
 from typing import Any, Callable, Iterable, Sequence
 
-from orthosim.runtime.lifeline import exit_with_parent
+from orthosim.system.lifeline import exit_with_parent
 
 _ITEM, _END, _ERROR = "item", "end", "error"
 _POLL_S = 0.1  # how often a waiting side checks whether the other has gone

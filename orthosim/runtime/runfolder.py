@@ -11,12 +11,12 @@ copy cut short, a hand edit), with one line that names the fix. A batch runs suc
 
 from __future__ import annotations
 
-import hashlib
 import json
 from pathlib import Path
 
 from orthosim import __version__
 from orthosim.storage.atomic import write_json
+from orthosim.storage.checksums import file_sha256
 from orthosim.errors import OrthosimError
 
 RUN_FILE = "run.json"
@@ -24,10 +24,6 @@ RUN_FILE = "run.json"
 
 class RunFolderError(OrthosimError):
     """A run folder is missing, unfinished, unreadable or from another orthosim version."""
-
-
-def file_sha256(path: str | Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def output_digests(out_dir: str | Path) -> dict[str, str]:

@@ -1,10 +1,12 @@
 """Sphere trees of teeth: the bounding-volume hierarchy the sphere-tree collision detectors descend.
 
-`SphereTree` (tree.py) is the data layout; `build_sphere_tree` builds one with the octree or the
-optimising builder; `cached_sphere_tree` does the same through an on-disk cache, `cached_sphere_trees` for many
-meshes at once over every core; `read_sph` /
-`write_sph` exchange trees with Bradshaw's Sphere-Tree Construction Toolkit; `measure_tree` gives
-the paper's error figures (sphere outside volume) and coverage.
+`tree` (`SphereTree`, the data layout), `build` (`build_sphere_tree`: the octree or the optimising
+builder), `fit` (the optimising fit of a node's spheres), `enclose` (minimal enclosing spheres),
+`inside` (which points lie inside the mesh), `outside_band` (the outside-volume score, compiled),
+`octree` (the paper's octree builder), `fitcache` (fits kept on disk), `cache` (`cached_sphere_tree`,
+`cached_sphere_trees` for many meshes over every core), `sph` (`read_sph` / `write_sph`: Bradshaw's
+Sphere-Tree Construction Toolkit format), `measure` (`measure_tree`: the paper's sphere outside
+volume and the coverage).
 """
 
 from orthosim.spheretree.build import build_sphere_tree

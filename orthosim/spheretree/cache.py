@@ -34,7 +34,7 @@ from orthosim.errors import DamagedFileError
 from orthosim.storage.atomic import atomic_path
 from orthosim.storage.cacheentry import (ENTRY_FORMAT, HEADER, DamagedEntryWarning, damaged, read_arrays, warn_damaged,
                                         write_arrays)
-from orthosim.runtime.lifeline import exit_with_parent
+from orthosim.system.lifeline import exit_with_parent
 from orthosim.storage.sourcedigest import source_digest
 from orthosim.spheretree.build import DEPTH, build_sphere_tree, check_request, default_branching, mesh_arrays
 from orthosim.spheretree.tree import SphereTree
@@ -267,7 +267,7 @@ def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int | 
             yield from ((e, _build(job)) for job, e in zip(jobs, waiting))
             return
         # fork: the children start at once with the parent's imports and compiled kernels
-        # each worker ends with this process if it is killed outright (orthosim.runtime.lifeline)
+        # each worker ends with this process if it is killed outright (orthosim.system.lifeline)
         with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
                                  initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
             futures = {pool.submit(_build, job): e for job, e in zip(jobs, waiting)}

@@ -25,7 +25,7 @@ from orthosim import __version__
 from orthosim.staging.ipr import InterproximalReduction
 from orthosim.staging.limits import StageLimits
 from orthosim.staging.sweep import ToothBodies, min_clearance
-from orthosim.staging.target import COMPONENTS, UNITS, movement_components
+from orthosim.exchange.target import COMPONENTS, UNITS, movement_components
 
 REACH_MM = 1.0  # pairs that come within this of each other are listed with their clearance
 TOLERANCE_MM = 1e-3  # the true least clearance is within this below the one reported

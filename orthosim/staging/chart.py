@@ -18,7 +18,7 @@ from orthosim import __version__
 from orthosim.storage.atomic import write_json, write_text
 from orthosim.staging.ipr import USUAL_MAX_PER_CONTACT_MM
 from orthosim.staging.plan import StagingPlan
-from orthosim.staging.target import COMPONENTS, UNITS
+from orthosim.exchange.target import COMPONENTS, UNITS
 
 CHART_COLUMNS = ("stage", "fdi") + tuple(f"{c}_{UNITS[c]}" for c in COMPONENTS) + ("progress", "held")
 IPR_COLUMNS = ("fdi_a", "fdi_b", "ipr_mm", "per_surface_mm", "before_stage", "above_guideline")
@@ -28,7 +28,7 @@ def stages_record(plan: StagingPlan, case_file: str | Path | None = None) -> dic
     """The stages.json content: the case (absolute path and SHA-256, so `stage verify` finds it and
     knows it unchanged), limits, counts, IPR, order constraints, and per stage FDI -> pose (4x4
     row-major nested lists, local -> arch frame, mm)."""
-    from orthosim.runtime.runfolder import file_sha256
+    from orthosim.storage.checksums import file_sha256
 
     return {
         "orthosim_version": __version__,

@@ -2,7 +2,7 @@
 
 Defaults are the common clinical ones (ArchForm's defaults, for instance): mesiodistal and
 buccolingual 0.25 mm, extrusion/intrusion 0.15 mm, tip 2 degrees, torque 1 degree, rotation 2
-degrees per stage. A stage's components are measured as in `orthosim.staging.target`
+degrees per stage. A stage's components are measured as in `orthosim.exchange.target`
 (`movement_components`): translation of the tooth's local origin, angles as rotation-vector
 components in the tooth's start frame; each must stay within its limit in absolute value.
 """
@@ -15,7 +15,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from orthosim.errors import OrthosimError
-from orthosim.staging.target import COMPONENTS, UNITS
+from orthosim.exchange.target import COMPONENTS, UNITS
 
 
 class LimitsError(OrthosimError):

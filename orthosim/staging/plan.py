@@ -33,7 +33,7 @@ from orthosim.model.dentition import Dentition
 from orthosim.staging.contacts import StageChecker
 from orthosim.staging.ipr import InterproximalReduction, StagingError, reduction_for
 from orthosim.staging.limits import StageLimits
-from orthosim.staging.target import movement_components
+from orthosim.exchange.target import movement_components
 
 _EPS = 1e-9
 

@@ -22,7 +22,7 @@ from orthosim.errors import OrthosimError
 from orthosim.model import fdi as F
 from orthosim.staging.ipr import MAX_IPR_MM, InterproximalReduction
 from orthosim.staging.limits import StageLimits
-from orthosim.staging.target import COMPONENTS, UNITS
+from orthosim.exchange.target import COMPONENTS, UNITS
 
 STAGES_FILE = "stages.json"
 ROTATION_ATOL = 1e-6  # |R R^T - I| allowed in a written pose (JSON keeps 17 digits; this is slack)

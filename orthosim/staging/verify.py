@@ -39,7 +39,7 @@ from orthosim.staging.ipr import CLEARANCE_MM
 from orthosim.staging.limits import StageLimits
 from orthosim.staging.stagesfile import StagingFolderError, WrittenStaging, read_stages
 from orthosim.staging.sweep import ToothBodies, first_contact_on_grid
-from orthosim.staging.target import COMPONENTS, UNITS, movement_components
+from orthosim.exchange.target import COMPONENTS, UNITS, movement_components
 
 STEP_MM = 0.005  # the most any vertex moves relative to another tooth between two samples
 TARGET_ATOL_MM = 1e-6  # a written pose within this of the case's own (matrix entries, mm)
@@ -82,7 +82,7 @@ def load_for_verify(folder: str | Path, case_path: str | Path | None = None):
     """(written staging, dentition, start poses, target poses), every file checked and the case
     matched to the staging; StagingFolderError (or the case's own CaseError) otherwise."""
     from orthosim.exchange.case import load_case
-    from orthosim.runtime.runfolder import file_sha256
+    from orthosim.storage.checksums import file_sha256
 
     written = read_stages(folder)
     case_file = Path(case_path) if case_path is not None else written.case_file

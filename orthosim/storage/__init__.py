@@ -1,5 +1,6 @@
 """Bytes on disk: atomic writes, checksummed cache entries and the source digests that key caches.
 
 `atomic` (write beside, then rename), `cacheentry` (every cache's entries: format, key and SHA-256,
-verified on read), `sourcedigest` (cache keys that change with the code).
+verified on read), `sourcedigest` (cache keys that change with the code), `checksums` (a file's
+SHA-256: is this the file a result was made from).
 """

@@ -2,5 +2,6 @@
 
 `runs` reads finished run folders, `gather` computes a case's figures once per pose, `pictures`
 renders the contact areas and distance maps, `figures` draws the plots, `page` writes index.html
-and report.json from one template, `browser` prints the PDF and checks the page in headless Chromium.
+and report.json from one template, `browser` prints the PDF and checks the page in headless Chromium,
+`regression_page` the CI page of an image-regression run.
 """

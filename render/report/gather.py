@@ -17,11 +17,11 @@ import numpy as np
 
 from orthosim.exchange.case import load_case
 from orthosim.analysis.contacttable import ContactParts, PairContact, StepContacts, contact_table
-from orthosim.analysis.evidence.matching import evidence_for_case
+from orthosim.evidence.matching import evidence_for_case
 from orthosim.collision.detectors import DETECTORS as DETECTOR_ORDER
 from orthosim.analysis.distancemap import DistanceMapModel, ToothDistances
 from orthosim.errors import OrthosimError
-from orthosim.analysis.occlusion import bolton_ratios
+from orthosim.model.occlusion import bolton_ratios
 from orthosim.analysis.spaceanalysis import ArchSpace, arch_space, widths_mm
 
 from orthosim_render.report.runs import RunData

@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from orthosim.movement.report import STEPS_FILE, read_steps
-from orthosim.runtime.runfolder import RunFolderError, file_sha256, read_finished_run
+from orthosim.runtime.runfolder import RunFolderError, read_finished_run
+from orthosim.storage.checksums import file_sha256
 
 
 @dataclass(frozen=True, eq=False)

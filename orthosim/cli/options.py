@@ -1,0 +1,127 @@
+"""Options shared by several commands: image sizes, step lists, camera views, the offscreen GL
+backend and the options of every command that draws a run (`run`, `demo`, `batch`).
+
+Each drawing option is read here once and becomes a field of the frozen
+`orthosim.runtime.run.RunOptions`; nothing below the command line sees a flag name.
+"""
+
+from __future__ import annotations
+
+import click
+
+from orthosim.runtime.run import MIN_ANIMATION_S, RunOptions
+
+GL_CHOICES = ("auto", "egl", "osmesa")  # orthosim_render.offscreen_backend.CHOICES (not imported here: --help stays light)
+
+
+def parse_size(ctx, param, value: str) -> tuple[int, int]:
+    """`WIDTHxHEIGHT` in pixels (16 to 8192 each) as (width, height)."""
+    try:
+        w, h = (int(v) for v in value.lower().split("x"))
+        if not (16 <= w <= 8192 and 16 <= h <= 8192):
+            raise ValueError
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is not WIDTHxHEIGHT in pixels (16 to 8192), e.g. 640x480") from None
+    return w, h
+
+
+def parse_steps(ctx, param, value: str | None) -> tuple[int, ...] | None:
+    """A comma-separated list of step numbers (0 or more each), or None."""
+    if value is None:
+        return None
+    try:
+        steps = tuple(int(v) for v in value.split(","))
+        if not steps or min(steps) < 0:
+            raise ValueError
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is not a comma-separated list of step numbers, e.g. 0,60,120") from None
+    return steps
+
+
+def parse_views(ctx, param, value: tuple[str, ...]) -> tuple[str, ...]:
+    """Camera presets checked while the options are read: a bad --view stops before any work."""
+    from orthosim_render.cameras import check_view  # numpy only, no OpenGL
+
+    return tuple(check_view(v) for v in value)
+
+
+def gl_option(f):
+    """`--gl auto|egl|osmesa`: the offscreen OpenGL backend of a command that draws (see select_gl)."""
+    return click.option("--gl", type=click.Choice(GL_CHOICES), default=None,
+                        help="Offscreen OpenGL: auto (an EGL GPU, else EGL on Mesa's software device, else OSMesa), "
+                             "egl or osmesa. Default: $ORTHOSIM_GL, else auto.")(f)
+
+
+def select_gl(gl: str | None) -> str:
+    """Choose this process's offscreen OpenGL backend now, before any work (a one-line error, exit 2,
+    when it cannot start); `gl` None keeps ORTHOSIM_GL or auto. Children inherit the choice."""
+    import os
+
+    from orthosim_render.offscreen_backend import ENV, select
+
+    if gl:
+        os.environ[ENV] = gl
+    return select().label
+
+
+def render_options(f):
+    """Options shared by the commands that draw frames."""
+    f = gl_option(f)
+    f = click.option("--no-render", is_flag=True, help="Run the simulation alone; write no images.")(f)
+    f = click.option("--size", default="640x480", show_default=True, callback=parse_size, help="Image size WIDTHxHEIGHT.")(f)
+    f = click.option("--view", "views", multiple=True, callback=parse_views,
+                     help="Camera preset (repeatable): frontal, right_buccal, left_buccal, maxillary_occlusal, "
+                          "mandibular_occlusal. Default: frontal.")(f)
+    f = click.option("--gif", is_flag=True, help="Also write animation.gif (at the frame's size).")(f)
+    f = click.option("--alpha", is_flag=True, help="PNG frames with a transparent background.")(f)
+    f = click.option("--hide-roots", is_flag=True, help="Draw crowns only.")(f)
+    f = click.option("--frames-per-step", default=None, type=click.IntRange(1, 120),
+                     help="Animation frames per simulation step (positions interpolated between steps). "
+                          "Default: enough for --seconds.")(f)
+    f = click.option("--seconds", default=None, type=float,
+                     help=f"Length of the animation in seconds (default: at least {MIN_ANIMATION_S:g}).")(f)
+    f = click.option("--fps", default=30, show_default=True, type=int, help="Animation frames per second.")(f)
+    f = click.option("--split-views", is_flag=True,
+                     help="Also write each view's own PNG per frame (frames/<view>/NNNNN.png) besides the tiled frame.")(f)
+    f = click.option("--export-scene", type=click.Choice(["glb", "ply"]), default=None,
+                     help="Write the posed teeth at --export-steps for Blender, MeshLab or Open3D (scene/).")(f)
+    f = click.option("--export-steps", default=None, callback=parse_steps,
+                     help="Steps to export with --export-scene, comma-separated (default: first and last).")(f)
+    f = click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors and warnings.")(f)
+    f = click.option("-v", "--verbose", is_flag=True,
+                     help="Print each phase with its time even when the output is not a terminal.")(f)
+    f = click.option("--labels", is_flag=True, help="Write each crown's FDI number on the frames.")(f)
+    f = click.option("--no-overlay", is_flag=True,
+                     help="Bare frames: no case name, detector, day counter or colour legend drawn on them.")(f)
+    f = click.option("--contact-faces", is_flag=True,
+                     help="Also colour the tooth surface inside each contact sphere (as in the paper's Figure 7).")(f)
+    f = click.option("--contact-faces-exact", is_flag=True,
+                     help="Colour only the triangles within 0.05 mm of the tooth they touch (exact), not all inside the spheres.")(f)
+    return f
+
+
+def check_render_options(render_opts: dict) -> None:
+    """Refuse an unknown --view, or an offscreen backend that cannot start, before any work."""
+    if not render_opts.get("no_render"):
+        from orthosim_render.cameras import check_view
+
+        select_gl(render_opts.get("gl"))
+
+        for view in render_opts.get("views") or ():
+            check_view(view)
+
+
+def run_options(detector: str | None, opts: dict) -> RunOptions:
+    """The RunOptions of the `run` and `demo` command-line options (by name; absent ones keep their defaults)."""
+    d = RunOptions()
+    get = opts.get
+    return RunOptions(detector=detector, render=not get("no_render", False), views=tuple(get("views") or ()) or d.views,
+                      size=tuple(get("size", d.size)), gif=get("gif", d.gif), alpha=get("alpha", d.alpha),
+                      hide_roots=get("hide_roots", d.hide_roots), contact_faces=get("contact_faces", d.contact_faces),
+                      contact_faces_exact=get("contact_faces_exact", d.contact_faces_exact),
+                      labels=get("labels", d.labels), overlay=not get("no_overlay", False),
+                      frames_per_step=get("frames_per_step"), seconds=get("seconds"), fps=get("fps", d.fps),
+                      split_views=get("split_views", d.split_views), export_scene=get("export_scene"),
+                      export_steps=get("export_steps"), simulate_in_process=get("simulate_in_process", False),
+                      single_core=get("single_core", False), gl=get("gl"),
+                      verbosity=0 if get("quiet") else 2 if get("verbose") else 1)

@@ -1,0 +1,99 @@
+"""`orthosim run` and `orthosim demo`: one case simulated, detected and drawn into a run folder.
+
+`run_case` is also what each `orthosim batch` worker and `orthosim report` call (a module-level
+function, so it pickles by name to worker processes and Dask workers).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import click
+
+from orthosim.cli.options import render_options, run_options, select_gl
+from orthosim.collision.detectors import DETECTORS
+from orthosim.runtime.run import RunOptions
+
+DEMO_VIEWS = ("right_buccal", "maxillary_occlusal")
+
+
+@click.command()
+@click.argument("case", type=click.Path(path_type=Path))
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=None,
+              help="Output folder (default: out/<case name>).")
+@click.option("--detector", type=click.Choice(DETECTORS), default=None,
+              help="Collision detector (default: the case's).")
+@render_options
+def run(case: Path, out_dir: Path | None, detector: str | None, **render_opts) -> None:
+    """Run one case: simulate, detect, write frames and metrics."""
+    _run_case(case, out_dir or Path("out") / case.stem, run_options(detector, render_opts))
+
+
+@click.command()
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("out/demo"), show_default=True,
+              help="Output folder.")
+@render_options
+def demo(out_dir: Path, **render_opts) -> None:
+    """Run the paper's case 1 (cases/case1_...) into out/demo/."""
+    from orthosim.exchange.case import DEFAULT_CASE
+
+    render_opts["views"] = render_opts.get("views") or DEMO_VIEWS
+    _run_case(DEFAULT_CASE, out_dir, run_options(None, render_opts))
+
+
+def run_case(case_path: Path, out_dir: Path, detector: str | None, render_opts: dict) -> dict:
+    """One run as `orthosim run` does it, also what each `orthosim batch` worker calls (a
+    module-level function, so it pickles by name to worker processes and Dask workers).
+    render_opts: the `run` command's options by name (any left out take their defaults), plus
+    `simulate_in_process` and `single_core` (batch workers, `RunOptions`). Returns the run's metrics and run record, merged."""
+    import json
+
+    started = time.perf_counter()
+    _run_case(case_path, out_dir, run_options(detector, render_opts))
+    record = json.loads((Path(out_dir) / "run.json").read_text())
+    # a batch worker outlives its runs: the run's own wall time, not the process's age
+    return {**json.loads((Path(out_dir) / "metrics.json").read_text()), **record, "wall_s": time.perf_counter() - started}
+
+
+def _run_case(case_path: Path, out_dir: Path, options: RunOptions) -> dict:
+    """One run (`orthosim.runtime.run.run_case`) with this package's renderer; returns the run record (run.json)."""
+    from orthosim.runtime.run import run_case
+
+    def check_view(name: str) -> str:
+        from orthosim_render.cameras import check_view
+
+        return check_view(name)
+
+    from orthosim.runtime.outputfolder import output_folder
+
+    if options.render:
+        select_gl(options.gl)  # before any work: a backend that cannot start is one line, not a half-written run
+    # out_dir is checked and locked now, before any work; the run is written into a private
+    # staging folder that replaces it whole at the end, so a failed or stopped run leaves it as it was
+    lines: list[str] = []
+    # a case file kept in its own run folder (each `orthosim batch` variant's case.toml) is an input: kept
+    carry = (Path(case_path).name,) if Path(case_path).resolve().parent == Path(out_dir).resolve() else ()
+    with output_folder(out_dir, carry) as staging:
+        record = run_case(case_path, staging, options, draw=_render_steps, check_view=check_view,
+                          shown_dir=out_dir, summary_to=lines.append)
+    for line in lines:  # after the swap: the summary names files that are there
+        click.echo(line)
+    return record
+
+
+def _render_steps(dent, records, out_dir: Path, options: RunOptions, *, extracted: frozenset[int], per_step: int,
+                  total: int, progress: bool, case) -> dict:
+    """Draw every simulated step (`per_step` frames each) into out_dir: frames, animation, split views,
+    with the overlay (case, detector, day N of M, legend, FDI labels on request) unless --no-overlay."""
+    from orthosim_render.animation import render_run
+    from orthosim_render.overlay import FrameCaption, model_legend
+    from orthosim_render.timeline import frames_from_steps
+
+    caption = FrameCaption(case.name, options.detector, case.step_days, case.duration_days, labels=options.labels,
+                           extra_legend=model_legend(dent, options.hide_roots)) if options.overlay else None
+    frames = frames_from_steps(records, extracted, per_step)
+    return render_run(dent, frames, out_dir, views=options.views, size=options.size, gif=options.gif, alpha=options.alpha,
+                      hide_roots=options.hide_roots, color_contact_faces=options.contact_faces, fps=options.fps,
+                      split_views=options.split_views, total=total, progress=progress,
+                      exact_contact_faces=options.contact_faces_exact, caption=caption, single_core=options.single_core)

@@ -1,0 +1,43 @@
+"""Running the evidence table: each row through its kind (`kinds.MEASURES`), with its verdict."""
+
+from __future__ import annotations
+
+import math
+
+from orthosim.evidence.models import EvidenceModels
+from orthosim.evidence.kinds import MEASURES
+from orthosim.evidence.table import EvidenceRow, RowResult, load_evidence
+from orthosim.mechanics.biomechanics import PARAMETER_SETS, RateLaw
+
+
+def run_rows(bench: EvidenceModels, rows: tuple[EvidenceRow, ...]) -> list[RowResult]:
+    """Every row run on `bench`, in table order (rows on a model the bench lacks are skipped)."""
+    out = []
+    for row in rows:
+        if not bench.has(row.model):
+            out.append(RowResult(row, math.nan, "skipped", "the real patient's data (../shared/data) is absent"))
+            continue
+        value, note, curve = MEASURES[row.kind](bench, row)
+        inside = row.low - 1e-9 <= value <= row.high + 1e-9
+        out.append(RowResult(row, float(value), "inside" if inside else "outside", note, curve))
+    return out
+
+
+def evidence_models(law: RateLaw | None = None, with_real: bool = True) -> EvidenceModels:
+    """A bench for `law` (default: the "clinical" set), with the real patient when `with_real` and
+    its data is present (../shared/data, `orthosim.exchange.shareddata`)."""
+    from orthosim.exchange.shareddata import open_full_jaw_dir
+
+    real = None
+    if with_real and open_full_jaw_dir("maxilla").is_dir():
+        def real():
+            from orthosim.exchange.case import CASES_DIR, load_case
+
+            return load_case(CASES_DIR / "open_full_jaw_patient26.toml").build_dentition()
+    return EvidenceModels(law or PARAMETER_SETS["clinical"], real)
+
+
+def run_evidence(law: RateLaw | None = None, with_real: bool = True,
+                 rows: tuple[EvidenceRow, ...] | None = None) -> list[RowResult]:
+    """The evidence table (or `rows`) run under `law` (default: the "clinical" set)."""
+    return run_rows(evidence_models(law, with_real), rows or load_evidence())

@@ -1,0 +1,7 @@
+"""Tooth mechanics: how a tooth answers a force system, before any step is taken.
+
+`resistance` (centre of resistance rules), `ratelaw` (the rate law's parameter sets: the paper's and
+the clinical fit), `biomechanics` (a tooth's loads -> its motion: force system, wire, rate law),
+`vec` (small vector helpers). The step that applies these (`orthosim.movement`) sits above; the
+case reader (`orthosim.exchange.case`) validates its settings against these names.
+"""

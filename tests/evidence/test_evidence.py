@@ -1,0 +1,223 @@
+"""The clinical evidence table: every row's verdict held, the fit behind the "clinical" rate law, the page.
+
+Each row of `orthosim/evidence/evidence.toml` is run on the model as `orthosim evidence` runs it
+(coarse parametric model, monthly steps: seconds) and must land where `VERDICTS` says: inside
+its published interval, or outside with the one-line reason the page shows. A new row needs its
+verdict here; a change to the model that moves a row across its interval fails here.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cli_helpers import orthosim
+from orthosim.evidence import load_evidence, run_evidence
+from orthosim.errors import CaseError
+from orthosim.mechanics.biomechanics import DAYS_PER_MONTH, PARAMETER_SETS, RateLaw
+
+VERDICTS = {
+    "monini2019_upper_canine_rate": "inside",
+    "monini2019_lower_canine_rate": "inside",
+    "theodorou2019_plateau_50_250": "inside",
+    "theodorou2019_above_250": "outside",  # the law saturates: no faster above 250 cN
+    "papageorgiou2005_cr_single_rooted": "inside",
+    "papageorgiou2005_cr_single_rooted_real": "inside",
+    "fea_upper_first_molar_cr": "inside",
+    "fea_upper_first_molar_cr_real": "inside",
+    "smith_burstone1984_controlled_tipping": "inside",
+    "smith_burstone1984_translation": "inside",
+    "smith_burstone1984_root_movement": "inside",
+    "ccd2018_canine_retraction_molar_anchorage": "inside",
+    "ccd2018_lower_canine_retraction_molar_anchorage": "outside",  # the lower molars stay under the threshold
+    "ccd2018_canine_retraction_implant_anchorage": "inside",
+    "becker2018_en_masse_anchorage_difference": "inside",
+}
+ROWS = load_evidence()
+PARAMETRIC = [r.id for r in ROWS if r.model == "parametric"]
+REAL = [r.id for r in ROWS if r.model == "real"]
+
+
+@pytest.fixture(scope="module")
+def parametric_results():
+    return {r.row.id: r for r in run_evidence(with_real=False, rows=tuple(r for r in ROWS if r.model == "parametric"))}
+
+
+@pytest.fixture(scope="module")
+def real_results():
+    return {r.row.id: r for r in run_evidence(with_real=True, rows=tuple(r for r in ROWS if r.model == "real"))}
+
+
+def test_every_row_of_the_table_has_a_verdict_held_here_and_the_table_has_every_topic():
+    assert set(VERDICTS) == {r.id for r in ROWS}
+    assert len(ROWS) >= 8
+    assert {r.topic for r in ROWS} == {"rate", "rate vs force", "centre of resistance", "M/F", "anchorage"}
+
+
+@pytest.mark.parametrize("row_id", PARAMETRIC)
+def test_a_row_on_the_parametric_model_keeps_its_verdict(parametric_results, row_id):
+    result = parametric_results[row_id]
+    assert math.isfinite(result.value)
+    assert result.status == VERDICTS[row_id], (row_id, result.value, result.row.low, result.row.high, result.note)
+    if result.status == "outside":
+        assert result.row.outside and result.reason == result.row.outside  # the page's one-line reason
+
+
+@pytest.mark.real_data
+@pytest.mark.parametrize("row_id", REAL)
+def test_a_row_on_the_real_patient_keeps_its_verdict(real_results, row_id):
+    result = real_results[row_id]
+    assert result.status == VERDICTS[row_id], (row_id, result.value, result.note)
+
+
+def test_real_rows_are_skipped_not_failed_when_the_shared_data_is_absent(monkeypatch, tmp_path):
+    monkeypatch.setenv("ORTHOSIM_SHARED_DATA", str(tmp_path))
+    results = run_evidence(with_real=True, rows=tuple(r for r in ROWS if r.model == "real"))
+    assert results and all(r.status == "skipped" and math.isnan(r.value) for r in results)
+
+
+def test_a_lower_canine_moves_more_slowly_than_an_upper_one_under_the_same_spring(parametric_results):
+    upper = parametric_results["monini2019_upper_canine_rate"].value
+    lower = parametric_results["monini2019_lower_canine_rate"].value
+    assert 0.1 < upper - lower < 0.25  # Monini 2019: 0.71 against 0.57 mm a month
+
+
+def test_a_molar_held_by_a_mini_implant_does_not_move_and_a_molar_anchor_gives_way(parametric_results):
+    assert parametric_results["ccd2018_canine_retraction_implant_anchorage"].value == 0.0
+    assert parametric_results["ccd2018_canine_retraction_molar_anchorage"].value > 0.5
+
+
+def test_the_clinical_constants_are_the_least_squares_fit_to_the_table():
+    from orthosim.evidence.calibration import fit_clinical
+
+    fit = fit_clinical()
+    shipped = PARAMETER_SETS["clinical"]
+    for name in ("threshold_cN", "saturation_cN", "max_rate_mm_per_day", "mandibular_bone_factor"):
+        assert getattr(fit.law, name) == pytest.approx(getattr(shipped, name), rel=0.01), name
+    assert all(abs(res) < 1.0 for _, _, _, res in fit.residuals)  # each fitted row within its half interval
+
+
+def test_the_paper_set_keeps_the_replication_values_and_a_case_without_the_table_uses_it():
+    from orthosim.exchange.case import CASES_DIR, load_case
+    from orthosim.movement.simulation import MovementSettings
+
+    assert PARAMETER_SETS["paper"] == RateLaw() == RateLaw(20.0, 150.0, 1.0 / 30.0, 200.0, 1.0)
+    for name in ("case1_first_premolar_extraction", "case2_second_premolar_extraction", "case3_incisor_space_closure"):
+        case = load_case(CASES_DIR / f"{name}.toml")
+        assert MovementSettings.from_case(case).rate is PARAMETER_SETS["paper"]
+
+
+def test_a_case_picks_the_clinical_set_and_may_override_one_constant(tmp_path):
+    from orthosim.exchange.case import load_case
+    from orthosim.movement.simulation import MovementSettings
+
+    path = tmp_path / "c.toml"
+    path.write_text('[model]\nresolution = "coarse"\n[[loads]]\nteeth = [13]\nforce_cN = 98\n'
+                    '[biomechanics]\nparameters = "clinical"\nmax_rate_mm_per_month = 0.9\n')
+    law = MovementSettings.from_case(load_case(path)).rate
+    clinical = PARAMETER_SETS["clinical"]
+    assert law.max_rate_mm_per_day * DAYS_PER_MONTH == pytest.approx(0.9)
+    assert (law.threshold_cN, law.saturation_cN, law.mandibular_bone_factor) == (
+        clinical.threshold_cN, clinical.saturation_cN, clinical.mandibular_bone_factor)
+
+
+@pytest.mark.parametrize("table, field, words", [
+    ('parameters = "fast"', "biomechanics.parameters", "use one of: paper, clinical"),
+    ("threshold_cN = -3", "biomechanics.threshold_cN", "at least 0"),
+    ("saturation_cN = 10", "biomechanics.saturation_cN", "must exceed the threshold"),
+    ("mandibular_bone_factor = 9", "biomechanics.mandibular_bone_factor", "outside 0.25 to 4"),
+    ("max_rate = 1", "biomechanics.max_rate", "unknown key"),
+])
+def test_a_bad_biomechanics_table_is_one_line_naming_the_file_and_field_with_exit_status_2(tmp_path, table, field, words):
+    path = tmp_path / "bad.toml"
+    path.write_text(f'[model]\nresolution = "coarse"\n[[loads]]\nteeth = [13]\nforce_cN = 98\n[biomechanics]\n{table}\n')
+    done = orthosim("check", str(path))
+    assert done.returncode == 2
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(path) in lines[0] and field in lines[0] and words in lines[0], lines
+    assert "Traceback" not in done.stderr
+
+
+def test_a_damaged_evidence_table_names_the_file_and_the_row(tmp_path):
+    text = Path(load_evidence.__defaults__[0]).read_text()
+    bad = tmp_path / "evidence.toml"
+    bad.write_text(text.replace('kind = "rate_ratio"', 'kind = "ratio"', 1))
+    with pytest.raises(CaseError, match=r"evidence\.toml.*rows\[2\]\.kind.*unknown kind 'ratio'"):
+        load_evidence(bad)
+    bad.write_text(text.replace("low = 0.71", "low = 0.9", 1))
+    with pytest.raises(CaseError, match=r"rows\[0\]\.high.*interval \[0.9, 0.72\] is empty"):
+        load_evidence(bad)
+
+
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
+def test_the_evidence_page_opens_in_headless_chromium_with_a_plot_per_row(tmp_path):
+    from PIL import Image
+
+    from orthosim_render.report.browser import NAMES, load_page
+
+    if not any(shutil.which(n) for n in NAMES):
+        pytest.fail("headless Chromium is not installed: run `bash tools/dev.sh install`")
+    out = tmp_path / "evidence"
+    done = orthosim("evidence", "--out", str(out), "--no-real")
+    assert done.returncode == 0, done.stderr
+    data = json.loads((out / "evidence.json").read_text())
+    assert [r["id"] for r in data["rows"]] == [r.id for r in ROWS]
+    assert {r["id"]: r["status"] for r in data["rows"] if r["status"] != "skipped"} == {
+        k: v for k, v in VERDICTS.items() if k in PARAMETRIC}
+    page = load_page(out / "index.html", window=(1400, 1600))
+    assert page.problems == []
+    assert page.images == len(PARAMETRIC)  # one plot per row run (the skipped real rows have none)
+    shot = np.asarray(Image.open(io.BytesIO(page.screenshot_png)).convert("RGB")).astype(int)
+    green = np.all(np.abs(shot - [26, 127, 55]) < 40, axis=2).mean()  # the verdicts and interval bands
+    assert shot.shape[1] >= 1400 and green > 0.0005, green
+    html = (out / "index.html").read_text()
+    assert "outside: the rate law saturates" in html
+    # a rerun into the same folder replaces it whole
+    assert orthosim("evidence", "--out", str(out), "--no-real").returncode == 0
+
+
+def test_the_report_line_names_the_rows_a_case_falls_under_and_the_papers_cases_no_treatment_row():
+    from orthosim.evidence.matching import evidence_for_case
+    from orthosim.exchange.case import CASES_DIR, load_case
+
+    def ids(name):
+        return {m.row_id for m in evidence_for_case(load_case(CASES_DIR / f"{name}.toml"), ROWS)}
+
+    assert {"monini2019_upper_canine_rate", "ccd2018_canine_retraction_molar_anchorage"} <= ids("canine_retraction_upper")
+    reinforced = ids("canine_retraction_upper_reinforced")
+    assert "ccd2018_canine_retraction_implant_anchorage" in reinforced
+    assert "ccd2018_canine_retraction_molar_anchorage" not in reinforced
+    assert "monini2019_lower_canine_rate" in ids("canine_retraction_lower")
+    assert "becker2018_en_masse_anchorage_difference" in ids("en_masse_retraction")
+    assert ids("normal_occlusion") == set()
+    assert not {i for i in ids("case1_first_premolar_extraction") if i.startswith(("monini", "ccd", "becker"))}
+
+
+@pytest.mark.parametrize("name, molar_mm", [("canine_retraction_upper", (0.8, 1.8)),
+                                            ("canine_retraction_upper_reinforced", (0.0, 0.0))])
+def test_the_shipped_canine_retraction_closes_the_space_and_the_molar_gives_what_the_trial_found(name, molar_mm):
+    from orthosim.exchange.case import CASES_DIR, load_case
+    from orthosim.movement import MovementModel, simulate
+
+    case = load_case(CASES_DIR / f"{name}.toml")
+    model = MovementModel.build(case)  # its smooth model: the loads are shared by that model's root surfaces
+    records = list(simulate(model, "continuous"))
+    first, last = records[0], records[-1]
+    moved = {t: float(np.linalg.norm(last.poses[t][:3, 3] - first.poses[t][:3, 3])) for t in (13, 16)}
+    assert any({13, 15} == set(p) for p in last.touching)  # the canine reached the second premolar
+    assert moved[13] > 5.0
+    assert molar_mm[0] <= moved[16] <= molar_mm[1] + 1e-12, moved
+
+
+def test_the_papers_constants_miss_the_canine_trials_which_is_why_the_clinical_set_exists():
+    rows = tuple(r for r in ROWS if r.id in ("monini2019_upper_canine_rate", "monini2019_lower_canine_rate"))
+    paper = {r.row.id: r for r in run_evidence(PARAMETER_SETS["paper"], with_real=False, rows=rows)}
+    upper, lower = paper["monini2019_upper_canine_rate"], paper["monini2019_lower_canine_rate"]
+    assert upper.status == "outside" and upper.value < 0.6  # well under the trial's 0.71 mm a month
+    assert lower.value > upper.value  # and the lower canine faster than the upper, against the trial
