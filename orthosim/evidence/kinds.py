@@ -61,7 +61,7 @@ def _travel(model, records, fdi: int, direction: np.ndarray) -> np.ndarray:
 
 
 def _distal(model, records, fdi: int) -> np.ndarray:
-    from orthosim.movement.simulation import arch_direction
+    from orthosim.movement.directions import arch_direction
 
     return arch_direction(model, records[0].poses, fdi, "distal")
 
@@ -246,7 +246,7 @@ def anchorage_run(bench: EvidenceModels, retracted, anchors, force_cN: float, re
                   for t, f in _shared(bench, anchors, force_cN).items()]
     model, records = _run(bench, tuple(loads), (_first_premolar(lead),), MAX_CLOSING_STEPS, (lead, anchors[0]))
     molar = 10 * F.quadrant(lead) + 6
-    from orthosim.movement.simulation import arch_direction
+    from orthosim.movement.directions import arch_direction
 
     mesial = arch_direction(model, records[0].poses, molar, "mesial")
     days = np.array([r.time_days for r in records])

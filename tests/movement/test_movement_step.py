@@ -13,8 +13,12 @@ from movement_helpers import coarse_case
 from orthosim.collision import CollisionModel
 from orthosim.movement import MovementModel, simulate
 from orthosim.mechanics.biomechanics import Motion
-from orthosim.movement.simulation import (Detection, Hit, StepState, contacts_at, detection, forces, initial_state,
-                                          motions, response, step)
+from orthosim.movement.detection import Detection, Hit, detection
+from orthosim.movement.forces import forces
+from orthosim.movement.motions import motions
+from orthosim.movement.response import contacts_at, response
+from orthosim.movement.simulation import initial_state, step
+from orthosim.movement.state import StepState
 from orthosim.model.parametric import parametric_dentition
 
 
