@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator, Sequence
 
+from orthosim.runtime.outputfolder import clear_leftovers
 from orthosim.storage.atomic import write_text
 from orthosim.batch.plan import BatchError, Variant
 from orthosim.batch.table import FAILED, OK, RunRow, finished_summary, write_table
@@ -144,6 +145,7 @@ def run_batch(variants: Sequence[Variant], out_dir: Path, run_case: RunCase, opt
             if summary is None:
                 todo.append(v)
             else:
+                clear_leftovers(out_dir / v.run_id)  # a kill during its swap may have left the earlier copy
                 row = rows[v.run_id]
                 row.status, row.reused = OK, True
                 row.record(summary)

@@ -172,6 +172,19 @@ def _read_holder(lock: Path) -> str:
         return ""
 
 
+def clear_leftovers(target: str | Path) -> None:
+    """What runs killed mid-way left beside `target` (staging folders, a replaced folder not yet
+    deleted, the lock file), removed while no run holds the folder. For a finished run that is kept
+    rather than run again (a resumed batch): a kill that landed while its folder was being swapped
+    in leaves the earlier copy beside it."""
+    target = Path(target)
+    try:
+        with _locked(target, str(target)):
+            _remove_stale(target)
+    except OutputFolderError:
+        pass  # another run holds it (or the place cannot be written): that run clears its own
+
+
 def _remove_stale(target: Path) -> None:
     """Staging and replaced folders of this target left by runs that were killed (we hold the lock)."""
     for prefix in (_STAGING, _OLD):

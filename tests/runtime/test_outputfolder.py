@@ -11,7 +11,7 @@ import pytest
 
 from folder_helpers import earlier_run, listing
 
-from orthosim.runtime.outputfolder import OutputFolderError, output_folder
+from orthosim.runtime.outputfolder import OutputFolderError, clear_leftovers, output_folder
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -132,3 +132,14 @@ def test_a_case_file_kept_in_its_run_folder_is_carried_into_the_new_run(tmp_path
         (staging / "metrics.json").write_text("{}")
     assert sorted(p.name for p in target.iterdir()) == ["case.toml", "metrics.json"]
     assert (target / "case.toml").read_text() == "[model]\n"
+
+
+def test_what_a_kill_during_the_swap_left_beside_a_finished_folder_is_cleared_without_running_again(tmp_path):
+    out = tmp_path / "out"
+    with output_folder(out) as staging:
+        (staging / "run.json").write_text("{}")
+    (tmp_path / ".out.orthosim-old-4242" / "frames").mkdir(parents=True)  # the earlier copy, not yet deleted
+    (tmp_path / ".out.orthosim-lock").write_text("4242\n")  # its lock file, never unlinked
+    clear_leftovers(out)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+    assert (out / "run.json").read_text() == "{}"  # the finished run itself untouched
