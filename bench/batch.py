@@ -13,7 +13,7 @@ runs each of 2 workers does 12, and start-up is about a tenth of its CPU (a twen
 
 Beside the figures, what explains them: the workers' CPU seconds per run (from the operating
 system's accounting of the finished worker processes, ffmpeg included) and the cores the batch
-kept busy on average. A worker runs each run on one core (`worker.ONE_CORE`, `worker.WORKER_ENV`:
+kept busy on average. A worker runs each run on one core (`RunOptions.on_one_core`, `worker.WORKER_ENV`:
 simulation, drawing and encoding on one thread), so one worker keeps about one core busy and two
 workers on two cores can gain up to 2x; `ratio_ceiling` is min(2, cores / cores_busy_1_worker),
 meaningful on a quiet machine. On a loaded machine the ratio means little: the kernel shares the
@@ -34,7 +34,8 @@ from pathlib import Path
 
 from orthosim.batch.execute import BatchOptions, prebuild_trees, run_batch
 from orthosim.batch.plan import parse_sweep, plan_batch
-from orthosim.batch.worker import ONE_CORE, RunCase
+from orthosim.batch.worker import RunCase
+from orthosim.runtime.options import RenderOptions, RunOptions
 
 TARGET_RATIO = 1.8
 RUNS = 24
@@ -63,7 +64,7 @@ def batch_throughput(run_case: RunCase, case: str | Path, *, runs: int = RUNS, d
     else:  # a case without loads: the runs differ in their (otherwise unused) restitution
         sweeps.append(parse_sweep("simulation.restitution=" + ",".join(f"{0.01 * (i + 1):g}" for i in range(runs))))
     variants = plan_batch([case], sweeps=sweeps)
-    render_opts = {"size": tuple(size), "frames_per_step": frames_per_step, "views": ("frontal",), **ONE_CORE}
+    options = RunOptions(render=RenderOptions(size=tuple(size), frames_per_step=frames_per_step)).on_one_core()
     cores = os.cpu_count() or 1
     record: dict = {"case": str(case), "runs": len(variants), "steps_per_run": variants[0].steps,
                     "frames_per_run": variants[0].steps * frames_per_step + 1, "size": list(size),
@@ -78,7 +79,7 @@ def batch_throughput(run_case: RunCase, case: str | Path, *, runs: int = RUNS, d
             cpu0, own0 = _children_cpu_s(), _self_cpu_s()
             started = time.perf_counter()
             rows = run_batch(variants, Path(tmp) / name, run_case,
-                             BatchOptions(workers=workers, render_opts=render_opts, prebuild_trees=False, progress=False))
+                             BatchOptions(workers=workers, run=options, prebuild_trees=False, progress=False))
             wall = time.perf_counter() - started
             cpu = _children_cpu_s() - cpu0  # the pool's workers are joined when run_batch returns
             failed = [f"{r.run_id}: {r.error}" for r in rows if r.status != "ok"]

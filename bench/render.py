@@ -343,7 +343,7 @@ class _BenchModel:
 def run_bench(case: str | Path | None = None, *, run_case=None, **options) -> dict:
     """Measure and return the bench record (see the module docstring and the output contract).
 
-    `options` are `BenchPlan`'s fields. `run_case(case_path, out_dir, detector, render_opts)` is the
+    `options` are `BenchPlan`'s fields. `run_case(case_path, out_dir, options: RunOptions)` is the
     CLI's own run (the composition root passes it in): the batch figure times what `orthosim run`
     does, and the bench imports no CLI.
 
@@ -446,6 +446,7 @@ def _end_to_end(plan: BenchPlan, dentition, state_iter, warm: int | None = None,
     encode on the sink's threads. Timed through its `on_frame` callback."""
     import tempfile
 
+    from orthosim.runtime.options import RenderOptions
     from orthosim_render.animation import render_run
 
     warm = plan.warmup if warm is None else warm
@@ -463,7 +464,7 @@ def _end_to_end(plan: BenchPlan, dentition, state_iter, warm: int | None = None,
 
     tmp_ctx = tempfile.TemporaryDirectory(prefix="orthosim-bench-") if plan.work_dir is None else None
     out_dir = Path(plan.work_dir) if plan.work_dir is not None else Path(tmp_ctx.name)
-    render_run(dentition, state_iter, out_dir, views=("frontal",), size=plan.size, png=plan.png, mp4=True, progress=False,
+    render_run(dentition, state_iter, out_dir, RenderOptions(size=tuple(plan.size), png=plan.png), progress=False,
                caption=caption, on_frame=on_frame)
     done = time.perf_counter()
     first = max(warm, 1)  # a frame's time runs from the frame before it

@@ -12,7 +12,7 @@ images to a `FrameSink`, which encodes on background threads while the next fram
   - split views (optional): besides the tiled frame, each view's image as
     `frames/<view>/NNNNN.png`.
 The queues between the renderer and the encoders are bounded: a slow disk slows the run down
-instead of filling memory. `render_run(single_core=True)` (a batch worker, one per core) does all
+instead of filling memory. `RenderOptions(single_core=True)` (a batch worker, one per core) does all
 of it on the calling thread instead: no frame-taking or encoder threads, ffmpeg on one thread.
 """
 
@@ -32,6 +32,7 @@ import numpy as np
 
 from orthosim.storage.atomic import atomic_path
 from orthosim.runtime.background import release_freed_heap
+from orthosim.runtime.options import RenderOptions
 
 from orthosim_render.cameras import check_view
 from orthosim_render.frame_state import FrameState
@@ -361,29 +362,27 @@ def _draw_frames(states, renderer, scene, views, overlay, sink, split_views: boo
     return n, render_s
 
 
-def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, views: Sequence[str] = ("frontal",),
-               size: tuple[int, int] = (640, 480), gif: bool = False, alpha: bool = False, progress: bool = True,
-               hide_roots: bool = False, color_contact_faces: bool = False, png: bool = True, mp4: bool = True,
-               fps: int = VIDEO_FPS, split_views: bool = False, total: int | None = None,
-               exact_contact_faces: bool = False, caption=None, on_frame: Callable | None = None,
-               single_core: bool = False) -> dict:
-    """Render every state in `frames` into out_dir (frames/NNNNN.png, animation.mp4, animation.gif).
+def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, options: RenderOptions = RenderOptions(),
+               *, total: int | None = None, progress: bool = True, caption=None,
+               on_frame: Callable | None = None) -> dict:
+    """Render every state in `frames` into out_dir (frames/NNNNN.png, animation.mp4, animation.gif),
+    as `options` (`orthosim.runtime.options.RenderOptions`) asks: views, size (w, h pixels), which
+    files, roots, contact faces, fps, split views, single core. Its `frames_per_step`, `seconds`,
+    `labels` and `overlay` are the caller's: they choose `frames` and `caption`.
 
-    `frames` is taken ahead on a thread (`prefetch`, unless single_core); `orthosim run` feeds it the records of a
-    simulation running in a child process (`orthosim.runtime.background`), so that simulating the next
-    steps and drawing this one use both cores instead of taking turns for one GIL.
+    `frames` is taken ahead on a thread (`prefetch`, unless options.single_core); `orthosim run` feeds
+    it the records of a simulation running in a child process (`orthosim.runtime.background`), so
+    that simulating the next steps and drawing this one use both cores instead of taking turns for
+    one GIL.
 
-    fps: the animation's frames per second. split_views: also write each view's own PNG per frame.
     total: the number of frames, when known (for the progress bar). A state given twice in a row
     (the same object: a step in which nothing moved) is drawn once and its image repeated.
     `caption` (a `orthosim_render.overlay.FrameCaption`) draws the shared overlay onto every frame: case,
     detector, day N of M, the colour legend and, if it asks for them, FDI labels.
     on_frame(state, scene): called once each frame is handed to the encoders (`orthosim bench`
     times this very loop frame by frame through it).
-    single_core: keep the run on the calling thread: `frames` taken as they come (no prefetch
-    thread), frames encoded inline (no encoder threads), ffmpeg on one thread. For a process that
-    has one core to itself and shares the machine with others doing the same (`orthosim batch`
-    workers); a run alone wants the pipeline, which keeps more than one core busy.
+    options.single_core keeps the run on the calling thread: `frames` taken as they come (no
+    prefetch thread), frames encoded inline (no encoder threads), ffmpeg on one thread.
 
     Memory: once the scene is built, the dentition's meshes forget their trimesh caches
     (`Dentition.drop_mesh_caches`: derived values, computed again if asked for).
@@ -395,14 +394,15 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
     from orthosim_render.renderer import Renderer
     from orthosim_render.scene import DentitionScene
 
-    views = [check_view(v) for v in (views or ("frontal",))]
+    views = [check_view(v) for v in (options.views or ("frontal",))]
+    size, single_core, split_views = tuple(options.size), options.single_core, options.split_views
     out_dir = Path(out_dir)
     if total is None:
         total = len(frames) if hasattr(frames, "__len__") else None
-    scene = DentitionScene(dentition, size, hide_roots=hide_roots, color_contact_faces=color_contact_faces,
-                           exact_contact_faces=exact_contact_faces)
-    sink = FrameSink(out_dir, png=png, mp4=mp4, gif=gif, video_fps=fps, split_views=views if split_views else (),
-                     inline=single_core)
+    scene = DentitionScene(dentition, size, hide_roots=options.hide_roots, contact_faces=options.contact_faces,
+                           contact_faces_exact=options.contact_faces_exact)
+    sink = FrameSink(out_dir, png=options.png, mp4=options.mp4, gif=options.gif, video_fps=options.fps,
+                     split_views=views if split_views else (), inline=single_core)
     bar = _Progress(progress, total)
     overlay = None
     if caption is not None:
@@ -412,7 +412,7 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
     dentition.drop_mesh_caches()  # the scene and overlay keep their own arrays; the meshes' derived ones go
     release_freed_heap()
     try:
-        with Renderer(size, alpha=alpha) as renderer, _interrupt_between_frames() as interrupted:
+        with Renderer(size, alpha=options.alpha) as renderer, _interrupt_between_frames() as interrupted:
             started = time.perf_counter()
             n, render_s = _draw_frames(frames if single_core else prefetch(frames), renderer, scene, views, overlay, sink,
                                        split_views, on_frame, bar, interrupted)
@@ -435,7 +435,7 @@ def render_run(dentition, frames: Iterable[FrameState], out_dir: str | Path, vie
         "size": list(size),
         "gl_renderer": gl_renderer,
         "gl_backend": gl_backend,  # orthosim_render.offscreen_backend: egl/gpu, egl/software, egl/default or osmesa
-        "video_fps": fps,
+        "video_fps": options.fps,
         "encode_s": encode_s,
         "overlay": None if caption is None else {"labels": caption.labels},
         # relative to out_dir: a run folder may be written in a staging place and moved (orthosim.runtime.outputfolder)

@@ -2,7 +2,7 @@
 
 Each facing pair's contact faces (`orthosim.analysis.occlusalcontacts`) are handed to the scene as small
 contact spheres on the tooth surface, and the scene's face painting (`DentitionScene`,
-`color_contact_faces`) colours every vertex inside one: the contact areas come out as coloured
+`contact_faces`) colours every vertex inside one: the contact areas come out as coloured
 patches on the maxillary and mandibular occlusal views (and any other view asked for).
 """
 
@@ -38,7 +38,7 @@ def render_occlusal_contacts(dentition, contacts, size=(640, 480), views: Sequen
     from orthosim_render.renderer import Renderer
     from orthosim_render.scene import DentitionScene
 
-    scene = DentitionScene(dentition, size, color_contact_faces=True, show_markers=False)
+    scene = DentitionScene(dentition, size, contact_faces=True, show_markers=False)
     scene.update(contact_state(dentition, contacts, poses))
     with Renderer(size) as renderer:
         return {v: np.asarray(renderer.render(scene, v))[..., :3].copy() for v in views}

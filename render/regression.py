@@ -85,7 +85,7 @@ def render_state(dentition, state, view: str = "frontal", size: tuple[int, int] 
     """
     from orthosim_render.scene import DentitionScene
 
-    scene = DentitionScene(dentition, size, hide_roots=hide_roots, color_contact_faces=contact_faces)
+    scene = DentitionScene(dentition, size, hide_roots=hide_roots, contact_faces=contact_faces)
     scene.update(state)
     renderer = _renderer((int(size[0]), int(size[1])))
     if labels:

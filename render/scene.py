@@ -165,13 +165,13 @@ class DentitionScene:
     """A pyrender scene of one dentition, its contact markers, the camera and the light rig."""
 
     def __init__(self, dentition: Dentition, size: tuple[int, int] = (640, 480), *, hide_roots: bool = False,
-                 color_contact_faces: bool = False, exact_contact_faces: bool = False, show_markers: bool = True,
+                 contact_faces: bool = False, contact_faces_exact: bool = False, show_markers: bool = True,
                  marker_style: str = "sprite",
                  marker_subdivisions: int = 1, frame_points: np.ndarray | None = None, unique_markers: bool = True,
                  smooth_cej: bool = True):
         """`marker_style`: "sprite" draws each contact sphere as a ray-cast point sprite (cheap at
         thousands of markers); "mesh" as an instanced icosphere (80 triangles at the default
-        `marker_subdivisions`). `show_markers=False` with `color_contact_faces=True` shows contacts
+        `marker_subdivisions`). `show_markers=False` with `contact_faces=True` shows contacts
         as coloured tooth surface only. `frame_points` ((n, 3) arch frame, mm) replace the rest-pose
         vertices as what the camera presets are framed on. `unique_markers`: a contact sphere
         listed several times is drawn once (see `_update_markers`); False draws every listing."""
@@ -181,8 +181,8 @@ class DentitionScene:
         self.dentition = dentition
         self.size = (int(size[0]), int(size[1]))
         self.hide_roots = hide_roots
-        self.color_contact_faces = color_contact_faces or exact_contact_faces
-        self.exact_contact_faces = exact_contact_faces
+        self.contact_faces = contact_faces or contact_faces_exact
+        self.contact_faces_exact = contact_faces_exact
         self.show_markers = show_markers
         self.unique_markers = unique_markers
         self.scene = pyrender.Scene(bg_color=[*BACKGROUND, 0.0], ambient_light=AMBIENT)
@@ -191,7 +191,7 @@ class DentitionScene:
 
         self.teeth: dict[int, _ToothDrawable] = {}
         for fdi in dentition.fdis:
-            d = _ToothDrawable(pyrender, fdi, dentition.teeth[fdi], hide_roots, self.color_contact_faces, smooth_cej)
+            d = _ToothDrawable(pyrender, fdi, dentition.teeth[fdi], hide_roots, self.contact_faces, smooth_cej)
             self.teeth[fdi] = d
             self.scene.add_node(d.node)
         if not hide_roots:  # the gum would hide the cervical crown that a crowns-only picture shows
@@ -294,7 +294,7 @@ class DentitionScene:
             self._extracted = state.extracted
             self._apply_visibility()
         self._update_markers(state.contact_centers, state.contact_radii)
-        if self.color_contact_faces:
+        if self.contact_faces:
             self._paint_contact_faces(state)
 
     def _arch_filter(self):
@@ -374,12 +374,12 @@ class DentitionScene:
 
     def _paint_contact_faces(self, state: FrameState) -> None:
         """Colour the vertices of each tooth that lie inside a contact sphere (the paper's Figure 7),
-        or with `exact_contact_faces` the triangles that touch the other tooth."""
+        or with `contact_faces_exact` the triangles that touch the other tooth."""
         centers, radii = state.contact_centers, state.contact_radii
         involved = {f for pair in state.contact_pairs for f in pair}
         for fdi, d in self.teeth.items():
             hits = None
-            if self.exact_contact_faces:
+            if self.contact_faces_exact:
                 if len(radii) and fdi in involved and fdi not in state.extracted:
                     hits = self._exact_hits(state, fdi, d)
             elif len(radii) and (not state.contact_pairs or fdi in involved) and fdi not in state.extracted:

@@ -52,10 +52,12 @@ def staging_frames(run, frames_per_stage: int = 6) -> Iterator[FrameState]:
 def render_staging(run, out_dir: str | Path, views: Sequence[str] = ("frontal",), size=(640, 480),
                    frames_per_stage: int = 6, gif: bool = False, hide_roots: bool = False) -> dict:
     """Render the staging animation into out_dir (frames/NNNNN.png, animation.mp4, optional GIF)."""
+    from orthosim.runtime.options import RenderOptions
     from orthosim_render.animation import render_run
 
     frames = list(staging_frames(run, frames_per_stage))
-    record = render_run(run.dentition, frames, out_dir, views=views, size=size, gif=gif, hide_roots=hide_roots)
+    options = RenderOptions(views=tuple(views), size=tuple(size), gif=gif, hide_roots=hide_roots)
+    record = render_run(run.dentition, frames, out_dir, options)
     # a longer staging staged into this folder before left more frames: they are not this plan's
     for stale in Path(out_dir, "frames").glob("[0-9][0-9][0-9][0-9][0-9].png"):
         if int(stale.stem) >= record["frames"]:

@@ -3,7 +3,7 @@
 `plan` turns cases, detectors and `--set` sweeps into validated variants; `execute` runs them
 into one folder (resumable, one lock, trees built once); `pool` is the local process pool,
 `cluster` the Dask runner, `worker` what either does around one run, `table` the batch.json and
-batch.csv rows. None of it draws: the function that runs one case (`orthosim.cli.run.run_case`,
+batch.csv rows. None of it draws: the function that runs one case (`orthosim.cli.run.run_for_batch`,
 which renders) is handed in by the composition root; the animations-per-minute figure is
 `orthosim_bench.batch`.
 """

@@ -19,8 +19,10 @@ import json
 import time
 import uuid
 from pathlib import Path
+from dataclasses import replace
 from typing import Iterator, Sequence
 
+from orthosim.runtime.options import RunOptions
 from orthosim.storage.atomic import write_bytes
 from orthosim.runtime.runfolder import RUN_FILE
 from orthosim.batch.plan import BatchError, Variant
@@ -66,7 +68,7 @@ def write_shipped_run(run_dir: Path, files: dict[str, bytes]) -> None:
         write_bytes(run_dir / RUN_FILE, (json.dumps(run, indent=2) + "\n").encode())
 
 
-def run_cluster(client, variants: Sequence[Variant], out_dir: Path, run_case: RunCase, render_opts: dict,
+def run_cluster(client, variants: Sequence[Variant], out_dir: Path, run_case: RunCase, options: RunOptions,
                 run_timeout_s: float | None = None) -> Iterator[tuple[RunOutcome, int]]:
     """Yield (outcome, attempts) per variant as its task ends; the run's files are in out_dir by then."""
     from distributed import as_completed
@@ -74,7 +76,7 @@ def run_cluster(client, variants: Sequence[Variant], out_dir: Path, run_case: Ru
     batch_tag = uuid.uuid4().hex[:8]  # task keys unique to this invocation (a resumed batch submits anew)
     futures = {}
     for v in variants:
-        fut = client.submit(execute_shipped, run_case, v.run_id, v.case_text, v.detector, dict(render_opts),
+        fut = client.submit(execute_shipped, run_case, v.run_id, v.case_text, replace(options, detector=v.detector),
                             key=f"orthosim-run-{v.run_id}-{batch_tag}", pure=False)
         futures[fut.key] = (fut, v)
     pending = as_completed([f for f, _ in futures.values()])

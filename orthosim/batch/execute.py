@@ -19,10 +19,11 @@ import sys
 import time
 from collections import Counter
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Iterator, Sequence
 
+from orthosim.runtime.options import RunOptions
 from orthosim.runtime.outputfolder import clear_leftovers
 from orthosim.storage.atomic import write_text
 from orthosim.batch.plan import BatchError, Variant
@@ -55,11 +56,13 @@ class _TableWriter:
 
 @dataclass(frozen=True)
 class BatchOptions:
+    """How a batch runs: local workers or a Dask scheduler, time limit, retries, and what each run is asked."""
+
     workers: int = 1
     run_timeout_s: float | None = None  # a run still going after this is stopped and fails
     retries: int = 1  # local pool: runs tried again after their worker process died
     scheduler: str | None = None  # a Dask scheduler's address: run there instead of locally
-    render_opts: dict = field(default_factory=dict)  # as `orthosim run` takes them
+    run: RunOptions = RunOptions()  # what each run is asked (its detector: the variant's)
     prebuild_trees: bool = True
     progress: bool = True
 
@@ -162,7 +165,7 @@ def run_batch(variants: Sequence[Variant], out_dir: Path, run_case: RunCase, opt
             from orthosim.batch.cluster import connect, run_cluster
 
             client = connect(options.scheduler)
-            outcomes = run_cluster(client, todo, out_dir, run_case, options.render_opts, options.run_timeout_s)
+            outcomes = run_cluster(client, todo, out_dir, run_case, options.run, options.run_timeout_s)
         else:
             from orthosim.batch.pool import run_local
 
@@ -172,8 +175,8 @@ def run_batch(variants: Sequence[Variant], out_dir: Path, run_case: RunCase, opt
                     firsts.setdefault(v.model_key, case_files[v.run_id])
                 prebuild_trees(list(firsts.values()))
             client = None
-            tasks = [RunTask(v.run_id, str(case_files[v.run_id]), str(out_dir / v.run_id), v.detector,
-                             dict(options.render_opts)) for v in todo]
+            tasks = [RunTask(v.run_id, str(case_files[v.run_id]), str(out_dir / v.run_id),
+                             replace(options.run, detector=v.detector)) for v in todo]
             outcomes = run_local(tasks, run_case, options.workers, options.run_timeout_s, options.retries)
         progress = _Progress(len(todo), len(variants) - len(todo), options.progress)
         try:

@@ -1,7 +1,10 @@
 """What a batch worker does around one run: the same on a local worker process and on a Dask worker.
 
-The run itself is `run_case(case_file, out_dir, detector, render_opts) -> summary`, the function
-`orthosim run` calls, handed in by the composition root (`orthosim.cli`): this module never draws.
+The run itself is `run_case(case_file, out_dir, options: RunOptions) -> summary`, the run
+`orthosim run` makes, handed in by the composition root (`orthosim.cli.run.run_for_batch`): this
+module never draws. A local worker asks each run for one core (`RunOptions.on_one_core`), as
+WORKER_ENV holds each library to one thread; `orthosim run` alone keeps its pipeline, which keeps
+more than a core busy.
 Around it: the run's printed lines and warnings are captured (the batch shows one progress bar,
 not a bar per run; the text goes to `DIR/logs/<run-id>.log`), and any failure becomes an outcome
 with its one-line error instead of an exception, so that one bad run never stops the batch.
@@ -22,11 +25,12 @@ import signal
 import tempfile
 import time
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 from orthosim.errors import OrthosimError
+from orthosim.runtime.options import RunOptions
 from orthosim.batch.table import run_summary
 
 WORKER_ENV = {
@@ -37,24 +41,18 @@ WORKER_ENV = {
     "MKL_NUM_THREADS": "1",
 }
 
-# What a local worker asks of each run (`run_case`'s render_opts, `orthosim.runtime.run.RunOptions`): one
-# core, as WORKER_ENV holds each library to one thread: the simulation in this process rather than
-# a child, and simulation, drawing and encoding on one thread (no prefetch or encoder threads,
-# ffmpeg on one thread). `orthosim run` alone keeps its pipeline, which keeps more than a core busy.
-ONE_CORE = {"simulate_in_process": True, "single_core": True}
-
-RunCase = Callable[[Path, Path, str, dict], dict]
+RunCase = Callable[[Path, Path, RunOptions], dict]
 
 
 @dataclass(frozen=True)
 class RunTask:
-    """One run as a worker gets it (picklable): where its case file is and where it writes."""
+    """One run as a worker gets it (picklable): where its case file is, where it writes, and what
+    is asked of it (its detector set)."""
 
     run_id: str
     case_file: str
     out_dir: str
-    detector: str
-    render_opts: dict = field(default_factory=dict)
+    options: RunOptions
 
 
 @dataclass(frozen=True)
@@ -112,7 +110,7 @@ def execute(run_case: RunCase, task: RunTask) -> RunOutcome:
         warnings.showwarning = lambda message, category, filename, lineno, file=None, line=None: log.write(
             f"orthosim: warning: {' '.join(str(message).split())}\n")
         try:
-            summary = run_summary(run_case(Path(task.case_file), Path(task.out_dir), task.detector, dict(task.render_opts)) or {})
+            summary = run_summary(run_case(Path(task.case_file), Path(task.out_dir), task.options) or {})
         except OrthosimError as err:
             error = str(err)
         except Exception as err:  # a crash of this run, not of the batch: recorded with its traceback in the log
@@ -122,7 +120,7 @@ def execute(run_case: RunCase, task: RunTask) -> RunOutcome:
                       f"{socket.gethostname()}:{os.getpid()}", process_cpu_s() - cpu_started)
 
 
-def execute_shipped(run_case: RunCase, run_id: str, case_text: str, detector: str, render_opts: dict) -> tuple[RunOutcome, dict[str, bytes]]:
+def execute_shipped(run_case: RunCase, run_id: str, case_text: str, options: RunOptions) -> tuple[RunOutcome, dict[str, bytes]]:
     """A run on a machine that may not see the batch folder (a Dask worker): the case text comes
     with the task, the run writes into a private temporary folder, and its files go back with the
     outcome ({relative path: bytes}) for the client to write into DIR/<run-id>/."""
@@ -131,7 +129,7 @@ def execute_shipped(run_case: RunCase, run_id: str, case_text: str, detector: st
         run_dir = Path(tmp) / run_id
         run_dir.mkdir()
         (run_dir / "case.toml").write_text(case_text)
-        outcome = execute(run_case, RunTask(run_id, str(run_dir / "case.toml"), str(run_dir), detector, render_opts))
+        outcome = execute(run_case, RunTask(run_id, str(run_dir / "case.toml"), str(run_dir), options))
         files = {}
         if outcome.ok:
             for path in sorted(run_dir.rglob("*")):

@@ -1,7 +1,7 @@
 """`orthosim batch`: every case times every detector times every `--set` value, into one folder.
 
 The command wires the batch (planning, the local pool, the Dask runner: all core) to the function
-that runs one case, `orthosim.cli.run.run_case`, the same one `orthosim run` calls.
+that runs one case, `orthosim.cli.run.run_for_batch`, the same run `orthosim run` makes.
 """
 
 from __future__ import annotations
@@ -12,12 +12,11 @@ from pathlib import Path
 
 import click
 
-from orthosim.cli.options import check_render_options, render_options
-from orthosim.cli.run import run_case
+from orthosim.cli.options import check_render_options, render_options, run_options
+from orthosim.cli.run import run_for_batch
 from orthosim.collision.detectors import DETECTORS
 from orthosim.batch.execute import BatchOptions, counts, run_batch
 from orthosim.batch.plan import parse_sweep, plan_batch
-from orthosim.batch.worker import ONE_CORE
 
 
 @click.command()
@@ -43,13 +42,14 @@ from orthosim.batch.worker import ONE_CORE
 @click.option("--dry-run", is_flag=True, help="Validate and list the runs; run nothing.")
 @render_options
 def batch(cases, out_dir: Path, detectors, sweeps, workers, run_timeout, retries, scheduler, simulation, dry_run,
-          **render_opts) -> None:
+          **flags) -> None:
     """Run many cases and parameter sweeps; resumable; exit 1 when any run failed.
 
     Each run writes OUT/<run-id>/ as `orthosim run` does, plus case.toml (the exact case that ran).
     Running the same command again skips finished runs and redoes the rest.
     """
-    check_render_options(render_opts)
+    run = run_options(None, flags)
+    check_render_options(run)
     parsed = [parse_sweep(s) for s in sweeps]
     variants = plan_batch(cases, detectors, parsed)
     keys = [s.key for s in parsed]
@@ -59,10 +59,10 @@ def batch(cases, out_dir: Path, detectors, sweeps, workers, run_timeout, retries
         click.echo(f"{len(variants)} runs, all valid")
         return
     if simulation == "in-worker":
-        render_opts.update(ONE_CORE)
+        run = run.on_one_core()
     options = BatchOptions(workers=workers or os.cpu_count() or 1, run_timeout_s=run_timeout, retries=retries,
-                           scheduler=scheduler, render_opts=render_opts)
-    rows = run_batch(variants, out_dir, run_case, options, keys)
+                           scheduler=scheduler, run=run)
+    rows = run_batch(variants, out_dir, run_for_batch, options, keys)
     c = counts(rows)
     reused = f" ({c['reused']} from an earlier run)" if c["reused"] else ""
     click.echo(f"batch: {len(rows)} runs, {c['ok']} ok{reused}, {c['failed']} failed -> {out_dir}/batch.csv")

@@ -51,14 +51,14 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
     from orthosim_bench.render import run_bench
     from orthosim_bench.summary import summary_lines
 
-    from orthosim.cli.run import run_case
+    from orthosim.cli.run import run_for_batch
     from orthosim.storage.atomic import write_json
 
     record = run_bench(case, frames=frames, warmup=warmup, size=size, n_markers=markers,
                        memory_frames=memory_frames, png=not no_png, simulate=not no_simulate,
                        step_days=step_days, tree_build=not no_tree_build, startup=not no_startup,
                        staging=not no_staging, batch=not no_batch, report=not no_report, report_runs=report_runs,
-                       memory=not no_memory, run_case=run_case, labels=labels, scan=not no_scan)
+                       memory=not no_memory, run_case=run_for_batch, labels=labels, scan=not no_scan)
     if closure_case is not None:
         from orthosim_bench.closure import closure_timings
 

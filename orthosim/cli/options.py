@@ -1,15 +1,16 @@
 """Options shared by several commands: image sizes, step lists, camera views, the offscreen GL
 backend and the options of every command that draws a run (`run`, `demo`, `batch`).
 
-Each drawing option is read here once and becomes a field of the frozen
-`orthosim.runtime.run.RunOptions`; nothing below the command line sees a flag name.
+Each option is read here once and becomes a field of the frozen `orthosim.runtime.options.RunOptions`
+or of its `RenderOptions`, under the flag's own name (`--contact-faces` is `contact_faces`); nothing
+below the command line sees a flag name or a dict of options.
 """
 
 from __future__ import annotations
 
 import click
 
-from orthosim.runtime.run import MIN_ANIMATION_S, RunOptions
+from orthosim.runtime.options import MIN_ANIMATION_S, RenderOptions, RunOptions
 
 GL_CHOICES = ("auto", "egl", "osmesa")  # orthosim_render.offscreen_backend.CHOICES (not imported here: --help stays light)
 
@@ -100,28 +101,27 @@ def render_options(f):
     return f
 
 
-def check_render_options(render_opts: dict) -> None:
+def check_render_options(options: RunOptions) -> None:
     """Refuse an unknown --view, or an offscreen backend that cannot start, before any work."""
-    if not render_opts.get("no_render"):
+    if options.render is not None:
         from orthosim_render.cameras import check_view
 
-        select_gl(render_opts.get("gl"))
-
-        for view in render_opts.get("views") or ():
+        select_gl(options.render.gl)
+        for view in options.render.views:
             check_view(view)
 
 
-def run_options(detector: str | None, opts: dict) -> RunOptions:
-    """The RunOptions of the `run` and `demo` command-line options (by name; absent ones keep their defaults)."""
-    d = RunOptions()
-    get = opts.get
-    return RunOptions(detector=detector, render=not get("no_render", False), views=tuple(get("views") or ()) or d.views,
-                      size=tuple(get("size", d.size)), gif=get("gif", d.gif), alpha=get("alpha", d.alpha),
-                      hide_roots=get("hide_roots", d.hide_roots), contact_faces=get("contact_faces", d.contact_faces),
-                      contact_faces_exact=get("contact_faces_exact", d.contact_faces_exact),
-                      labels=get("labels", d.labels), overlay=not get("no_overlay", False),
-                      frames_per_step=get("frames_per_step"), seconds=get("seconds"), fps=get("fps", d.fps),
-                      split_views=get("split_views", d.split_views), export_scene=get("export_scene"),
-                      export_steps=get("export_steps"), simulate_in_process=get("simulate_in_process", False),
-                      single_core=get("single_core", False), gl=get("gl"),
-                      verbosity=0 if get("quiet") else 2 if get("verbose") else 1)
+def run_options(detector: str | None, flags: dict, **chosen) -> RunOptions:
+    """The RunOptions of `render_options`' flags as click gives them to a command (`--no-render`,
+    `--quiet` and `--verbose` become `render=None` and `verbosity`); `chosen` sets RunOptions fields
+    the command decides itself (e.g. simulate_in_process)."""
+    d = RenderOptions()
+    render = None if flags["no_render"] else RenderOptions(
+        views=tuple(flags["views"]) or d.views, size=tuple(flags["size"]), gif=flags["gif"], alpha=flags["alpha"],
+        hide_roots=flags["hide_roots"], contact_faces=flags["contact_faces"],
+        contact_faces_exact=flags["contact_faces_exact"], labels=flags["labels"], overlay=not flags["no_overlay"],
+        frames_per_step=flags["frames_per_step"], seconds=flags["seconds"], fps=flags["fps"],
+        split_views=flags["split_views"], gl=flags["gl"])
+    return RunOptions(detector=detector, render=render, export_scene=flags["export_scene"],
+                      export_steps=flags["export_steps"], verbosity=0 if flags["quiet"] else 2 if flags["verbose"] else 1,
+                      **chosen)

@@ -7,8 +7,9 @@ from pathlib import Path
 import click
 
 from orthosim.cli.options import gl_option, parse_size, select_gl
-from orthosim.cli.run import run_case
+from orthosim.cli.run import run_for_batch
 from orthosim.collision.detectors import DETECTORS, PAPER_DETECTORS
+from orthosim.runtime.options import RenderOptions, RunOptions
 
 
 @click.command()
@@ -41,8 +42,8 @@ def report(inputs: tuple[Path, ...], out_dir: Path, detectors: tuple[str, ...], 
         for path in inputs:
             for det in detectors or PAPER_DETECTORS:
                 run_dir = out_dir / "runs" / path.stem / det
-                opts = {"no_render": not render_runs, "size": size, "views": ("frontal",), "frames_per_step": 1, "gl": gl}
-                run_case(path, run_dir, det, opts)
+                render = RenderOptions(size=size, frames_per_step=1, gl=gl) if render_runs else None
+                run_for_batch(path, run_dir, RunOptions(detector=det, render=render))
                 run_dirs.append(run_dir)
     if pdf:
         from orthosim_render.report.browser import find_chromium

@@ -1,8 +1,8 @@
 """One run of a case, in phases: validate, model, trees, simulate (and draw), write.
 
-    result = run_case(case_path, out_dir, RunOptions(detector="discrete", views=("frontal",)), draw=draw)
+    result = run_one(case_path, out_dir, RunOptions(detector="discrete", render=RenderOptions(views=("frontal",))), draw=draw)
 
-`run_case` is the whole of `orthosim run` as one function with explicit arguments (a batch calls it
+`run_one` is the whole of `orthosim run` as one function with explicit arguments (a batch calls it
 once per variant; a wrapper may enclose it to stage the output folder). Its phases, in order:
   1. validate: the case file and every option, before anything heavy is imported or built, so a
      typo fails at once with one line;
@@ -25,54 +25,19 @@ from __future__ import annotations
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
 from orthosim.errors import OrthosimError
-from orthosim.runtime.stream import PhaseDone, RunResult, model_files, model_summary, simulation_stream  # noqa: F401 (the run's face)
+from orthosim.runtime.options import MIN_ANIMATION_S, SCENE_FORMATS, RenderOptions, RunOptions
+from orthosim.runtime.stream import PhaseDone, RunResult, simulation_stream
 
-MIN_ANIMATION_S = 5.0  # default animation length: at least this many seconds
-SCENE_FORMATS = ("glb", "ply")
 _STARTED = time.perf_counter()
 
 
 class OptionError(OrthosimError):
     """A command-line option asks for something the run cannot do."""
-
-
-@dataclass(frozen=True)
-class RunOptions:
-    """What the user asked of a run, besides the case (all validated by `validate`).
-
-    frames_per_step / seconds: animation frames per simulation step, or the animation's length in
-        seconds (at `fps`); neither: at least MIN_ANIMATION_S seconds.
-    export_scene: "glb" or "ply": the posed teeth at `export_steps` (default: first and last step).
-    verbosity: 0 quiet (errors and warnings only), 1 normal (phase lines and bars on a terminal,
-        the summary line), 2 verbose (phase lines wherever the output goes).
-    """
-
-    detector: str | None = None
-    render: bool = True
-    views: tuple[str, ...] = ("frontal",)
-    size: tuple[int, int] = (640, 480)
-    gif: bool = False
-    alpha: bool = False
-    hide_roots: bool = False
-    contact_faces: bool = False
-    contact_faces_exact: bool = False  # colour only the triangles within the touch tolerance (exact)
-    labels: bool = False  # FDI numbers on the crowns in the frames
-    overlay: bool = True  # case, detector, day N of M and the colour legend drawn on the frames
-    frames_per_step: int | None = None
-    seconds: float | None = None
-    fps: int = 30
-    split_views: bool = False
-    export_scene: str | None = None
-    export_steps: tuple[int, ...] | None = None
-    simulate_in_process: bool = False  # batch workers: one per core already, so no simulation child per run
-    single_core: bool = False  # batch workers: also simulate, draw and encode on one thread, ffmpeg on one (implies simulate_in_process)
-    verbosity: int = 1
-    gl: str | None = None  # offscreen OpenGL backend asked for (--gl): auto, egl, osmesa; None: ORTHOSIM_GL, else auto
 
 
 @dataclass
@@ -130,18 +95,7 @@ def validate(case_path: str | Path, out_dir: str | Path, options: RunOptions, ch
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise OptionError(out_dir, None, "exists and is not a folder", "give --out a folder path")
-    views = tuple(options.views or ("frontal",))
-    if check_view is not None:
-        views = tuple(check_view(v) for v in views)
-    if len(set(views)) != len(views):
-        raise OptionError("--view", ", ".join(views), "names a view twice", "give each view once")
-    if options.frames_per_step is not None and options.seconds is not None:
-        raise OptionError("--frames-per-step", str(options.frames_per_step), "and --seconds both set the animation's length",
-                          "give one of them")
-    if options.seconds is not None and not (0 < options.seconds <= 3600):
-        raise OptionError("--seconds", f"{options.seconds:g}", "is not a length from 0 to 3600 s", "e.g. --seconds 10")
-    if not 1 <= options.fps <= 120:
-        raise OptionError("--fps", str(options.fps), "is not 1 to 120 frames per second", "e.g. --fps 30")
+    render = options.render and validate_render(options.render, check_view)
     if options.export_scene is not None and options.export_scene not in SCENE_FORMATS:
         raise OptionError("--export-scene", options.export_scene, "is not a scene format", f"use one of {', '.join(SCENE_FORMATS)}")
     # the options above stand alone; those below need the case (a mesh model's folders are checked too)
@@ -155,16 +109,33 @@ def validate(case_path: str | Path, out_dir: str | Path, options: RunOptions, ch
         if bad:
             raise OptionError("--export-steps", str(bad[0]), f"is not a step of this case (0 to {case.steps})",
                               f"give steps from 0 to {case.steps}")
-    return case, RunOptions(**{**asdict(options), "detector": detector, "views": views})
+    return case, replace(options, detector=detector, render=render)
 
 
-def frames_per_step(options: RunOptions, steps: int) -> int:
+def validate_render(render: RenderOptions, check_view: Callable[[str], str] | None = None) -> RenderOptions:
+    """The drawing options with canonical view names; one-line errors for what cannot be drawn."""
+    views = tuple(render.views or ("frontal",))
+    if check_view is not None:
+        views = tuple(check_view(v) for v in views)
+    if len(set(views)) != len(views):
+        raise OptionError("--view", ", ".join(views), "names a view twice", "give each view once")
+    if render.frames_per_step is not None and render.seconds is not None:
+        raise OptionError("--frames-per-step", str(render.frames_per_step), "and --seconds both set the animation's length",
+                          "give one of them")
+    if render.seconds is not None and not (0 < render.seconds <= 3600):
+        raise OptionError("--seconds", f"{render.seconds:g}", "is not a length from 0 to 3600 s", "e.g. --seconds 10")
+    if not 1 <= render.fps <= 120:
+        raise OptionError("--fps", str(render.fps), "is not 1 to 120 frames per second", "e.g. --fps 30")
+    return replace(render, views=views)
+
+
+def frames_per_step(render: RenderOptions, steps: int) -> int:
     """Animation frames per simulation step: as asked, or enough for `seconds` (default MIN_ANIMATION_S)
     at `fps`; the animation has 1 + steps * frames_per_step frames."""
-    if options.frames_per_step is not None:
-        return options.frames_per_step
-    seconds = options.seconds if options.seconds is not None else MIN_ANIMATION_S
-    return max(1, math.ceil((seconds * options.fps - 1) / max(steps, 1)))
+    if render.frames_per_step is not None:
+        return render.frames_per_step
+    seconds = render.seconds if render.seconds is not None else MIN_ANIMATION_S
+    return max(1, math.ceil((seconds * render.fps - 1) / max(steps, 1)))
 
 
 class _Split:
@@ -197,14 +168,14 @@ class _Split:
 
 # ------------------------------------------------------------------------------------------ the run
 
-def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = RunOptions(),
-             draw: Callable | None = None, check_view: Callable[[str], str] | None = None,
-             shown_dir: str | Path | None = None, summary_to: Callable[[str], None] | None = None) -> dict:
+def run_one(case_path: str | Path, out_dir: str | Path, options: RunOptions = RunOptions(),
+            draw: Callable | None = None, check_view: Callable[[str], str] | None = None,
+            shown_dir: str | Path | None = None, summary_to: Callable[[str], None] | None = None) -> dict:
     """Run one case into out_dir (see the module doc); returns the run record (run.json).
 
     draw(dentition, records, out_dir, options, *, extracted, per_step, total, progress, case) -> dict:
-    renders the step records into frames and animations and returns what it measured and wrote;
-    None, or options.render False: simulate only.
+    renders the step records, as `options.render` asks, into frames and animations and returns what it measured and wrote;
+    None, or options.render None: simulate only.
     shown_dir: the folder the run is meant for, named in run.json and the summary, when out_dir is
     a private staging folder that will replace it (`orthosim.runtime.outputfolder`). summary_to: receives
     the summary line (when the verbosity shows it) instead of printing it, so that a caller can
@@ -212,16 +183,16 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
     """
     log = RunLog(options.verbosity)
     t = time.perf_counter()
-    case, options = validate(case_path, out_dir, options, check_view if options.render else None)
+    case, options = validate(case_path, out_dir, options, check_view)
     out_dir = Path(out_dir)
-    drawing = options.render and draw is not None
-    per_step = frames_per_step(options, case.steps)
-    n_frames = 1 + case.steps * per_step
+    render = options.render if draw is not None else None
+    per_step = frames_per_step(render, case.steps) if render else None
+    n_frames = 1 + case.steps * per_step if render else 0
     log.phase("validate", time.perf_counter() - t, f"{case.name}: {case.steps} steps of {case.step_days:g} days, "
                                                    f"{options.detector} detector")
-    if drawing:
-        log.note(f"{'':10} {'':9}  {n_frames} frames at {options.fps} fps ({n_frames / options.fps:.1f} s), "
-                 f"views {', '.join(options.views)}, {options.size[0]}x{options.size[1]}")
+    if render:
+        log.note(f"{'':10} {'':9}  {n_frames} frames at {render.fps} fps ({n_frames / render.fps:.1f} s), "
+                 f"views {', '.join(render.views)}, {render.size[0]}x{render.size[1]}")
     wanted = set(options.export_steps if options.export_steps is not None else (0, case.steps))
     posed: dict[int, object] = {}
 
@@ -229,7 +200,7 @@ def run_case(case_path: str | Path, out_dir: str | Path, options: RunOptions = R
         if options.export_scene and record.step in wanted:
             posed[record.step] = record
 
-    if drawing:
+    if render:
         split, dent, rendered = _simulate_and_draw(case, options, out_dir, draw, log, keep, per_step, n_frames)
     else:
         split, dent, rendered = _Split(simulation_stream(case, options.detector, out_dir), log, keep), None, {}
@@ -270,7 +241,7 @@ def _simulate_and_draw(case, options: RunOptions, out_dir: Path, draw: Callable,
     from orthosim.runtime.strategies import choose_strategy
 
     with ExitStack() as stack:
-        strategy = choose_strategy(options.simulate_in_process or options.single_core)
+        strategy = choose_strategy(options.simulate_in_process or options.render.single_core)
         source = strategy.start(case, options.detector, out_dir, log, stack)
         split = _Split(source.records, log, keep)
         rendered = draw(source.dentition, split, out_dir, options, extracted=frozenset(case.extractions),

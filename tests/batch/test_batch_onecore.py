@@ -1,6 +1,6 @@
 """A batch worker's run keeps to one core, and a batch worker builds each tooth's BVH once.
 
-One core: the worker asks `orthosim.cli.run.run_case` for `worker.ONE_CORE` (the simulation in the
+One core: the worker asks `orthosim.cli.run.run_for_batch` for `RunOptions.on_one_core()` (the simulation in the
 worker's process, no prefetch or encoder threads, ffmpeg on one thread) and runs with
 `worker.WORKER_ENV` (llvmpipe on one raster thread), and writes what `orthosim run` writes.
 BVH memo: `orthosim.geometry.meshquery` keeps each mesh's FCL BVH per process, by content, so the
@@ -14,6 +14,7 @@ import os
 import subprocess
 import sys
 import threading
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,11 +23,12 @@ import trimesh
 
 import batch_helpers as H
 from orthosim.batch import BatchOptions, parse_sweep, plan_batch, run_batch
-from orthosim.batch.worker import ONE_CORE, WORKER_ENV
+from orthosim.batch.worker import WORKER_ENV
 from orthosim.geometry import meshquery
+from orthosim.runtime.options import RenderOptions, RunOptions
 
 VOLATILE = {"wall_s", "fps", "render_fps", "case_file", "outputs"}
-BARE = {"size": (48, 32), "frames_per_step": 1, "views": ("frontal",)}
+BARE = RunOptions(render=RenderOptions(size=(48, 32), frames_per_step=1))
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +55,7 @@ def test_a_one_core_run_starts_no_thread_runs_ffmpeg_on_one_and_writes_what_orth
                                                                                                  monkeypatch):
     import imageio_ffmpeg
 
-    from orthosim.cli.run import run_case
+    from orthosim.cli.run import run_for_batch
 
     reference = tmp_path / "run"
     cli = [sys.executable, "-c", "from orthosim.cli import entry; entry()", "run", str(case_file), "--out", str(reference),
@@ -67,17 +69,17 @@ def test_a_one_core_run_starts_no_thread_runs_ffmpeg_on_one_and_writes_what_orth
     monkeypatch.setattr(imageio_ffmpeg, "write_frames",
                         lambda *a, **k: (ffmpeg_params.append(k.get("output_params")), real_write_frames(*a, **k))[1])
     one_core = tmp_path / "one_core"
-    record = run_case(case_file, one_core, None, {**BARE, **ONE_CORE})
+    record = run_for_batch(case_file, one_core, BARE.on_one_core())
     # no prefetch thread, no PNG or MP4 writer thread, no simulation child's sender; tqdm starts its
     # monitor (asleep but for a look every 10 s) with any bar, even one disabled off a terminal
     assert [name for name in started if name != "tqdm_monitor"] == []
     assert len(ffmpeg_params) == 1 and "-threads" in ffmpeg_params[0]
     assert ffmpeg_params[0][ffmpeg_params[0].index("-threads") + 1] == "1"
-    assert record["options"]["single_core"] is True
+    assert record["options"]["render"]["single_core"] is True
 
     # the pipelined run (this process, threads) starts its threads: the check above can fail
     pipelined = tmp_path / "pipelined"
-    run_case(case_file, pipelined, None, {**BARE, "simulate_in_process": True})
+    run_for_batch(case_file, pipelined, replace(BARE, simulate_in_process=True))
     assert {"prefetch", "png-0", "mp4"} <= set(started)
     assert "-threads" not in ffmpeg_params[1]
 
@@ -92,7 +94,7 @@ def test_a_one_core_run_starts_no_thread_runs_ffmpeg_on_one_and_writes_what_orth
 
 def test_batch_workers_render_with_one_llvmpipe_thread_and_no_python_thread_left(case_file, tmp_path):
     vs = plan_batch([case_file], sweeps=[parse_sweep("loads.0.force_cN=100,150")])
-    rows = run_batch(vs, tmp_path, H.with_threads, BatchOptions(workers=1, render_opts=H.RENDER, progress=False))
+    rows = run_batch(vs, tmp_path, H.with_threads, BatchOptions(workers=1, run=H.RUN, progress=False))
     assert [r.status for r in rows] == ["ok", "ok"]
     for v in vs:
         threads = json.loads((tmp_path / v.run_id / "threads.json").read_text())
@@ -171,14 +173,14 @@ def test_a_throw_away_mesh_stays_out_of_the_bvh_memo_and_pushes_no_tooth_out(mon
 
 
 def test_the_second_run_of_a_model_builds_no_bvh_and_gives_the_same_metrics(case_file, tmp_path):
-    from orthosim.cli.run import run_case
+    from orthosim.cli.run import run_for_batch
 
     meshquery.forget_bvhs()
     before = meshquery.bvh_builds
-    run_case(case_file, tmp_path / "first", None, {"no_render": True})
+    run_for_batch(case_file, tmp_path / "first", RunOptions(render=None))
     first = meshquery.bvh_builds - before
     assert first > 0
-    run_case(case_file, tmp_path / "second", None, {"no_render": True})
+    run_for_batch(case_file, tmp_path / "second", RunOptions(render=None))
     assert meshquery.bvh_builds - before == first  # none built for the second run
     assert stable_metrics(tmp_path / "second") == stable_metrics(tmp_path / "first")
     # and the same as a process that built every BVH itself
@@ -199,9 +201,9 @@ def test_a_one_core_render_writes_the_pipelined_files_and_a_failed_one_leaves_no
     dentition = standin_dentition()
     motion = SyntheticMotion(dentition, n_markers=50)
     states = [motion(i) for i in range(4)]
-    kw = dict(views=("frontal", "maxillary"), size=(80, 60), gif=True, split_views=True, progress=False)
-    render_run(dentition, states, tmp_path / "pipelined", **kw)
-    render_run(dentition, iter(states), tmp_path / "one_core", single_core=True, **kw)
+    options = RenderOptions(views=("frontal", "maxillary"), size=(80, 60), gif=True, split_views=True)
+    render_run(dentition, states, tmp_path / "pipelined", options, progress=False)
+    render_run(dentition, iter(states), tmp_path / "one_core", replace(options, single_core=True), progress=False)
     files = sorted(p.relative_to(tmp_path / "pipelined") for p in (tmp_path / "pipelined").rglob("*") if p.is_file())
     assert len([f for f in files if f.suffix == ".png"]) == 12  # 4 tiled frames, 4 per view
     assert files == sorted(p.relative_to(tmp_path / "one_core") for p in (tmp_path / "one_core").rglob("*") if p.is_file())
@@ -218,6 +220,6 @@ def test_a_one_core_render_writes_the_pipelined_files_and_a_failed_one_leaves_no
         raise OrthosimError("case.toml", "loads", "cannot continue")
 
     with pytest.raises(OrthosimError):
-        render_run(dentition, failing(), tmp_path / "failed", single_core=True, size=(80, 60), progress=False)
+        render_run(dentition, failing(), tmp_path / "failed", RenderOptions(size=(80, 60), single_core=True), progress=False)
     assert not (tmp_path / "failed" / "animation.mp4").exists()
     assert not [p for p in (tmp_path / "failed").rglob(".*")]  # no temporary file either

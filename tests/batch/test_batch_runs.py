@@ -1,7 +1,7 @@
 """Running batches: failure isolation, resume after a kill, a Dask cluster equal to the local pool,
 and sphere trees built safely when two processes need the same one at once.
 
-The runs are small (coarse teeth, two steps, 48x32 frames); the run function is `orthosim.cli.run.run_case`,
+The runs are small (coarse teeth, two steps, 48x32 frames); the run function is `orthosim.cli.run.run_for_batch`,
 or a wrapper from `batch_helpers` that crashes, hangs or kills its worker for chosen runs.
 """
 
@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -58,7 +59,7 @@ def local_batch(case_file, tmp_path_factory):
     """Three runs on two local worker processes, rendered: the reference for the other tests."""
     out = tmp_path_factory.mktemp("local")
     vs = variants(case_file)
-    rows = run_batch(vs, out, H._real, BatchOptions(workers=2, render_opts=H.RENDER, progress=False), ["loads.0.force_cN"])
+    rows = run_batch(vs, out, H._real, BatchOptions(workers=2, run=H.RUN, progress=False), ["loads.0.force_cN"])
     return out, vs, rows
 
 
@@ -117,7 +118,7 @@ def test_the_table_is_rewritten_every_few_seconds_not_after_every_run(case_file,
 def test_a_second_invocation_reuses_finished_runs_and_runs_nothing(local_batch):
     out, vs, _ = local_batch
     before = {v.run_id: (out / v.run_id / "run.json").stat().st_mtime_ns for v in vs}
-    rows = run_batch(vs, out, H.crash, BatchOptions(workers=2, render_opts={**H.RENDER, "fail_runs": ids(vs)},
+    rows = run_batch(vs, out, partial(H.crash, fail_runs=ids(vs)), BatchOptions(workers=2, run=H.RUN,
                                                     progress=False))
     assert all(r.status == "ok" and r.reused for r in rows)  # the crashing function never ran
     assert before == {v.run_id: (out / v.run_id / "run.json").stat().st_mtime_ns for v in vs}
@@ -127,8 +128,8 @@ def test_a_second_invocation_reuses_finished_runs_and_runs_nothing(local_batch):
 def test_failing_runs_are_recorded_and_the_batch_goes_on(case_file, tmp_path):
     vs = variants(case_file, "loads.0.force_cN=100,150,200")
     crashing = vs[0].run_id
-    opts = BatchOptions(workers=2, render_opts={**H.RENDER, "fail_runs": [crashing]}, progress=False)
-    rows = {r.run_id: r for r in run_batch(vs, tmp_path, H.crash, opts)}
+    opts = BatchOptions(workers=2, run=H.RUN, progress=False)
+    rows = {r.run_id: r for r in run_batch(vs, tmp_path, partial(H.crash, fail_runs=[crashing]), opts)}
     assert rows[crashing].status == "failed" and rows[crashing].error == "RuntimeError: simulated crash in the renderer"
     for ok in (vs[1].run_id, vs[2].run_id):
         assert rows[ok].status == "ok", rows[ok].error
@@ -137,7 +138,7 @@ def test_failing_runs_are_recorded_and_the_batch_goes_on(case_file, tmp_path):
     table = json.loads((tmp_path / "batch.json").read_text())
     assert (table["runs_ok"], table["runs_failed"]) == (2, 1)
     # the same command again runs the failed one only
-    rows = {r.run_id: r for r in run_batch(vs, tmp_path, H._real, BatchOptions(workers=2, render_opts=H.RENDER,
+    rows = {r.run_id: r for r in run_batch(vs, tmp_path, H._real, BatchOptions(workers=2, run=H.RUN,
                                                                                 progress=False))}
     assert all(r.status == "ok" for r in rows.values())
     assert [r.reused for r in rows.values()] == [False, True, True]
@@ -149,8 +150,8 @@ def test_a_hanging_run_is_stopped_at_the_run_timeout_and_the_others_finish(case_
     # ample for them even on a loaded machine, and the test waits seconds, not minutes
     vs = variants(case_file, "loads.0.force_cN=100,150,200,250")
     hanging = vs[1].run_id
-    opts = BatchOptions(workers=2, run_timeout_s=10, render_opts={**H.RENDER, "fail_runs": [hanging]}, progress=False)
-    rows = {r.run_id: r for r in run_batch(vs, tmp_path, H.hang_or_instant, opts)}
+    opts = BatchOptions(workers=2, run_timeout_s=10, run=H.RUN, progress=False)
+    rows = {r.run_id: r for r in run_batch(vs, tmp_path, partial(H.hang_or_instant, fail_runs=[hanging]), opts)}
     assert rows[hanging].status == "failed" and rows[hanging].error == "stopped after 10 s (--run-timeout)"
     assert [rows[v.run_id].status for v in vs if v.run_id != hanging] == ["ok"] * 3
     table = json.loads((tmp_path / "batch.json").read_text())
@@ -160,12 +161,13 @@ def test_a_hanging_run_is_stopped_at_the_run_timeout_and_the_others_finish(case_
 @pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
 def test_a_killed_worker_costs_its_run_one_retry_or_is_recorded(case_file, tmp_path):
     vs = variants(case_file, "loads.0.force_cN=100,150")
-    opts = {**H.RENDER, "fail_runs": [vs[0].run_id], "marker": str(tmp_path / "markers")}
-    rows = run_batch(vs, tmp_path / "retried", H.kill_worker_once, BatchOptions(workers=2, render_opts=opts, progress=False))
+    failing = {"fail_runs": [vs[0].run_id]}
+    rows = run_batch(vs, tmp_path / "retried", partial(H.kill_worker_once, **failing, marker=str(tmp_path / "markers")),
+                     BatchOptions(workers=2, run=H.RUN, progress=False))
     assert [(r.status, r.attempts) for r in rows] == [("ok", 2), ("ok", 1)]
     assert not (tmp_path / "retried" / vs[0].run_id / "partial.tmp").exists()  # the retry started from a clean folder
-    rows = run_batch(vs, tmp_path / "given_up", H.kill_worker_always,
-                     BatchOptions(workers=2, retries=0, render_opts=opts, progress=False))
+    rows = run_batch(vs, tmp_path / "given_up", partial(H.kill_worker_always, **failing),
+                     BatchOptions(workers=2, retries=0, run=H.RUN, progress=False))
     assert rows[0].status == "failed" and rows[0].error == "the worker process died (signal SIGKILL), 1 times"
     assert rows[1].status == "ok"
 
@@ -183,7 +185,7 @@ def test_the_command_exits_1_when_a_run_fails_and_0_when_all_succeed(case_file, 
     assert "batch: 1 runs, 1 ok, 0 failed" in done.stdout
     run_id = json.loads((tmp_path / "batch.json").read_text())["runs"][0]["run_id"]
     options = read_finished_run(tmp_path / run_id)["options"]
-    assert options["single_core"] and options["simulate_in_process"]  # the command asks each run for one core
+    assert options["render"]["single_core"] and options["simulate_in_process"]  # the command asks each run for one core
 
 
 @pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
@@ -222,11 +224,11 @@ def test_a_batch_killed_mid_run_resumes_without_redoing_finished_runs(case_file,
 def test_a_dask_cluster_gives_the_local_pools_results_and_survives_a_killed_worker(local_batch, tmp_path):
     distributed = pytest.importorskip("distributed")
     ref_out, vs, ref_rows = local_batch
-    opts = {**H.RENDER, "fail_runs": [vs[1].run_id], "marker": str(tmp_path / "markers")}
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None, silence_logs=True) as cluster:
-        rows = run_batch(vs, tmp_path / "dask", H.kill_worker_once,
-                         BatchOptions(scheduler=cluster.scheduler_address, render_opts=opts, progress=False))
+        rows = run_batch(vs, tmp_path / "dask", partial(H.kill_worker_once, fail_runs=[vs[1].run_id],
+                                                        marker=str(tmp_path / "markers")),
+                         BatchOptions(scheduler=cluster.scheduler_address, run=H.RUN, progress=False))
     assert (tmp_path / "markers" / vs[1].run_id).exists()  # a worker did die mid-run
     assert [r.status for r in rows] == ["ok"] * 3
     for v in vs:
@@ -274,7 +276,7 @@ def test_the_batch_builds_each_models_trees_before_its_workers_start(case_file, 
     built = []
     monkeypatch.setattr(execute, "prebuild_trees", lambda files: built.extend(files))
     vs = variants(case_file) + plan_batch([case_file], sweeps=[parse_sweep("model.resolution=medium")])
-    run_batch(vs, tmp_path, H.crash, BatchOptions(workers=1, render_opts={"fail_runs": ids(vs)}, progress=False))
+    run_batch(vs, tmp_path, partial(H.crash, fail_runs=ids(vs)), BatchOptions(workers=1, progress=False))
     # one case file per distinct model (three coarse variants share one), each written before the build
     assert [p.parent.name for p in built] == [vs[0].run_id, vs[3].run_id]
 

@@ -100,7 +100,7 @@ def test_exact_contact_faces_colour_the_pieces_of_the_cut_faces_they_name():
     from orthosim_render.scene import DentitionScene
 
     dent = _ball_dentition()
-    scene = DentitionScene(dent, (64, 48), hide_roots=False, show_markers=False, exact_contact_faces=True)
+    scene = DentitionScene(dent, (64, 48), hide_roots=False, show_markers=False, contact_faces_exact=True)
     drawn = scene.teeth[11]
     cut_faces = np.flatnonzero(np.bincount(drawn.face_of_row, minlength=len(dent.teeth[11].mesh.faces)) > 1)
     assert len(cut_faces)

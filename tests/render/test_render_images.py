@@ -157,7 +157,7 @@ def test_contact_markers_follow_the_state_as_their_number_changes(renderer, dent
 
 
 def test_faces_inside_contact_spheres_are_coloured(dentition):
-    scene = DentitionScene(dentition, SIZE, color_contact_faces=True)
+    scene = DentitionScene(dentition, SIZE, contact_faces=True)
     c = labial_point(dentition, 11, 3.0)
     scene.update(FrameState.rest(dentition, contact_centers=c[None], contact_radii=np.array([1.0]),
                                  contact_pairs=((11, 21),)))
@@ -263,7 +263,7 @@ def test_contact_faces_are_drawn_in_the_contact_colour(renderer, dentition):
     """The Figure 7 option: tooth surface inside a contact sphere coloured, no marker drawn."""
     c = labial_point(dentition, 11, 3.0)
     state = FrameState.rest(dentition, contact_centers=c[None], contact_radii=np.array([1.2]), contact_pairs=((11, 21),))
-    painted, view = render(renderer, dentition, "frontal", state, color_contact_faces=True, show_markers=False)
+    painted, view = render(renderer, dentition, "frontal", state, contact_faces=True, show_markers=False)
     hidden, _ = render(renderer, dentition, "frontal", state, show_markers=False)
     px, rc = pixel_at(painted, view, c)
     assert is_contact_colour(px)
@@ -305,7 +305,7 @@ def test_exact_contact_faces_are_the_touching_part_of_what_the_spheres_cover(den
     state = FrameState.rest(dentition, contact_centers=centers, contact_radii=radii, contact_pairs=((11, 21),))
     painted = {}
     for exact in (False, True):
-        scene = DentitionScene(dentition, SIZE, color_contact_faces=True, exact_contact_faces=exact)
+        scene = DentitionScene(dentition, SIZE, contact_faces=True, contact_faces_exact=exact)
         scene.update(state)
         colours = np.asarray(scene.teeth[11].primitive.color_0)[:, :3]
         painted[exact] = np.all(np.isclose(colours, scene_contact_colour()), axis=1)

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from orthosim.errors import OrthosimError
+from orthosim.runtime.options import RenderOptions
 from orthosim_render.animation import render_run, tile
 from orthosim_bench.render import SyntheticMotion, run_bench
 from orthosim_render.cameras import check_view, frame_view
@@ -25,8 +26,8 @@ def dentition():
 
 def test_run_writes_numbered_frames_video_and_gif(tmp_path, dentition):
     motion = SyntheticMotion(dentition, n_markers=50)
-    result = render_run(dentition, [motion(i) for i in range(4)], tmp_path, views=("frontal", "maxillary"),
-                        size=(160, 120), gif=True, progress=False)
+    result = render_run(dentition, [motion(i) for i in range(4)], tmp_path,
+                        RenderOptions(views=("frontal", "maxillary"), size=(160, 120), gif=True), progress=False)
     assert result["frames"] == 4 and result["fps"] > 0
     frames = sorted(p.name for p in (tmp_path / "frames").iterdir())
     assert frames == ["00000.png", "00001.png", "00002.png", "00003.png"]
@@ -40,15 +41,15 @@ def test_run_writes_numbered_frames_video_and_gif(tmp_path, dentition):
 
 
 def test_alpha_frames_keep_transparency(tmp_path, dentition):
-    render_run(dentition, [FrameState.rest(dentition)], tmp_path, size=(160, 120), alpha=True, progress=False,
-               mp4=False)
+    render_run(dentition, [FrameState.rest(dentition)], tmp_path, RenderOptions(size=(160, 120), alpha=True, mp4=False),
+               progress=False)
     image = iio.imread(tmp_path / "frames" / "00000.png")
     assert image.shape == (120, 160, 4)
     assert image[0, 0, 3] == 0 and image[:, :, 3].max() == 255
 
 
 def test_odd_image_sizes_still_make_a_video(tmp_path, dentition):
-    render_run(dentition, [FrameState.rest(dentition)] * 2, tmp_path, size=(161, 121), progress=False, png=False)
+    render_run(dentition, [FrameState.rest(dentition)] * 2, tmp_path, RenderOptions(size=(161, 121), png=False), progress=False)
     assert (tmp_path / "animation.mp4").stat().st_size > 0
 
 
@@ -139,7 +140,7 @@ def test_a_failed_run_leaves_no_partial_video(tmp_path, dentition):
         raise OrthosimError("case.toml", "loads", "cannot continue")
 
     with pytest.raises(OrthosimError):
-        render_run(dentition, states(), tmp_path, size=(160, 120), progress=False)
+        render_run(dentition, states(), tmp_path, RenderOptions(size=(160, 120)), progress=False)
     assert not (tmp_path / "animation.mp4").exists()
     assert not [p for p in tmp_path.rglob(".*")]  # no temporary files either
 
@@ -149,7 +150,7 @@ def test_render_run_reports_each_frame_to_its_caller_and_the_bench_times_render_
     motion = SyntheticMotion(dentition, n_markers=30)
     states = [motion(i) for i in range(4)]
     seen = []
-    render_run(dentition, states, tmp_path / "run", size=(160, 120), png=False, progress=False,
+    render_run(dentition, states, tmp_path / "run", RenderOptions(size=(160, 120), png=False), progress=False,
                on_frame=lambda st, sc: seen.append((st, len(sc.markers.positions))))
     assert [s for s, _ in seen] == states and all(n > 0 for _, n in seen)
 

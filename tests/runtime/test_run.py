@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orthosim.runtime.run import RunOptions, frames_per_step, run_case
+from orthosim.runtime.options import RenderOptions, RunOptions
+from orthosim.runtime.run import frames_per_step, run_one
 from cli_helpers import orthosim
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -31,7 +32,7 @@ def short_case(tmp_path_factory):
 @pytest.fixture(scope="module")
 def two_runs(short_case, tmp_path_factory):
     out = tmp_path_factory.mktemp("runs")
-    records = [run_case(short_case, out / name, RunOptions(render=False, export_scene="glb", verbosity=0))
+    records = [run_one(short_case, out / name, RunOptions(render=None, export_scene="glb", verbosity=0))
                for name in ("a", "b")]
     return out / "a", out / "b", records
 
@@ -128,7 +129,7 @@ def test_exported_glb_scene_puts_each_tooth_where_the_run_left_it(two_runs):
 def test_ply_export_writes_one_posed_tooth_per_file(short_case, tmp_path):
     import trimesh
 
-    run_case(short_case, tmp_path / "o", RunOptions(render=False, export_scene="ply", export_steps=(0,), verbosity=0))
+    run_one(short_case, tmp_path / "o", RunOptions(render=None, export_scene="ply", export_steps=(0,), verbosity=0))
     files = sorted((tmp_path / "o" / "scene" / "step_00000").glob("tooth_*.ply"))
     assert len(files) == 24  # 28 teeth less four extractions
     from orthosim.exchange.case import load_case
@@ -154,10 +155,10 @@ def test_a_bad_option_fails_at_once_with_one_line_and_no_output(tmp_path, args, 
 
 def test_the_default_animation_lasts_at_least_five_seconds():
     for steps in (1, 9, 30, 120, 1000):
-        n = 1 + steps * frames_per_step(RunOptions(), steps)
+        n = 1 + steps * frames_per_step(RenderOptions(), steps)
         assert n / 30 >= 5.0
-    assert frames_per_step(RunOptions(seconds=10, fps=24), 9) == 27  # 1 + 9 * 27 = 244 frames >= 240
-    assert frames_per_step(RunOptions(frames_per_step=3), 9) == 3
+    assert frames_per_step(RenderOptions(seconds=10, fps=24), 9) == 27  # 1 + 9 * 27 = 244 frames >= 240
+    assert frames_per_step(RenderOptions(frames_per_step=3), 9) == 3
 
 
 @pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
@@ -170,7 +171,7 @@ def test_a_drawn_run_has_the_asked_length_split_views_and_a_full_size_gif(short_
                  "--seconds", "2", "--fps", "10", "--split-views", "--gif", "--detector", "discrete")
     assert r.returncode == 0, r.stderr
     steps = 3
-    n = 1 + steps * frames_per_step(RunOptions(seconds=2, fps=10), steps)
+    n = 1 + steps * frames_per_step(RenderOptions(seconds=2, fps=10), steps)
     assert len(list((out / "frames").glob("*.png"))) == n
     for view in ("frontal", "right_buccal"):
         pngs = sorted((out / "frames" / view).glob("*.png"))
@@ -213,7 +214,7 @@ def test_a_real_jaw_runs_metrics_follow_the_published_schema_too(tmp_path):
     from orthosim.exchange.shareddata import shared_data_dir
 
     case.write_text(text.replace('"../../shared/data/', f'"{shared_data_dir().as_posix()}/'))
-    run_case(case, tmp_path / "out", RunOptions(render=False, verbosity=0))
+    run_one(case, tmp_path / "out", RunOptions(render=None, verbosity=0))
     schema = json.loads(resources.files("orthosim").joinpath("schema/metrics.schema.json").read_text())
     metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
     jsonschema.validate(metrics, schema)

@@ -40,7 +40,7 @@ def test_dropping_the_mesh_caches_forgets_derived_arrays_and_they_come_back_the_
 
 @pytest.mark.parametrize("shared", [False, True])
 def test_the_simulation_side_drops_the_caches_its_model_build_made_unless_another_thread_draws_the_teeth(tmp_path, shared):
-    from orthosim.runtime.run import PhaseDone, simulation_stream
+    from orthosim.runtime.stream import PhaseDone, simulation_stream
 
     case = load_case(CASE)
     dent = case.build_dentition()
