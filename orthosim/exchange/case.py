@@ -20,8 +20,8 @@ import numpy as np
 
 from orthosim.model import fdi as F
 from orthosim.collision.detectors import DETECTORS
-from orthosim.errors import CaseError
-from orthosim.exchange.casefields import FieldReader, teeth_list
+from orthosim.errors import CaseError, OrthosimError
+from orthosim.exchange.casefields import FieldReader
 from orthosim.exchange.target import CaseStaging, read_case_staging
 
 
@@ -146,6 +146,16 @@ class Occlusion:
 
 @dataclass(frozen=True)
 class Case:
+    """A validated case file (`load_case`): a patient's teeth and a treatment plan.
+
+    `model`: which teeth (the parametric dentition, tooth meshes, an Open-Full-Jaw folder or
+    labelled scans); `extractions`: FDI numbers taken out; `loads`: forces (cN) and moments (cN*mm)
+    on teeth; `wire`: rectangular or round; `duration_days` and `step_days` (days; `steps` of
+    them); `detector`: the collision detector a run uses; `simulation`, `biomechanics`,
+    `occlusion`: the movement model's settings; `staging`: the [start] and [target] of an aligner
+    set-up, or None. `build_dentition()` gives its teeth (cached on disk).
+    """
+
     path: Path
     name: str
     description: str
@@ -269,27 +279,78 @@ _LOAD = ("teeth", "force_cN", "direction", "point", "moment_cNmm", "moment_axis"
 
 
 def load_case(path: str | Path) -> Case:
-    """Read and validate a case file; raise CaseError (one line: file, field, fix) on any problem."""
+    """Read and validate a case file; raise its first problem as a CaseError (one line: file, field,
+    fix). `read_case` gives every problem of the file."""
+    case, problems = read_case(Path(path))
+    if problems:
+        raise problems[0]
+    return case
+
+
+def read_case(path: str | Path) -> tuple[Case | None, list[OrthosimError]]:
+    """(the case, or None when the file has problems; every problem, in the order of its sections).
+
+    Each problem is a one-line OrthosimError (`where`: the file, `field`: the dotted field): every
+    unknown key, and in each section (each load its own) the first value that cannot be read. A
+    file that is not valid TOML is one problem. What `orthosim check` lists."""
     path = Path(path)
     if not path.is_file():
-        raise CaseError(path, None, "no such case file", "check the path; shipped cases are in cases/")
+        return None, [CaseError(path, None, "no such case file", "check the path; shipped cases are in cases/")]
     try:
         with path.open("rb") as fh:
             data = tomllib.load(fh)
     except tomllib.TOMLDecodeError as err:
-        raise CaseError(path, None, f"not valid TOML: {err}", "fix the syntax at that line") from None
+        return None, [CaseError(path, None, f"not valid TOML: {err}", "fix the syntax at that line")]
     except (OSError, UnicodeDecodeError) as err:
-        raise CaseError(path, None, f"cannot be read: {err}", "check the file is a readable TOML text file") from None
+        return None, [CaseError(path, None, f"cannot be read: {err}", "check the file is a readable TOML text file")]
+    problems: list[OrthosimError] = []
 
-    top = FieldReader(path, "", data, _TOP)
-    meta = FieldReader(path, "case", top.get("case", {}), _CASE)
-    name = meta.string("name", path.stem)
-    description = meta.string("description", "")
+    def section(read, fallback=None):
+        """read() (one section), or its problem kept and `fallback` returned, so the next section is read."""
+        try:
+            return read()
+        except OrthosimError as err:
+            problems.append(err)
+            return fallback
 
-    model = _read_model(path, FieldReader(path, "model", top.get("model", {}), _MODEL))
-    present = model.present_teeth()
+    top = FieldReader(path, "", data, _TOP, problems)
 
-    treat = FieldReader(path, "treatment", top.get("treatment", {}), _TREATMENT)
+    def table(name: str, allowed: tuple[str, ...]) -> FieldReader:
+        return FieldReader(path, name, top.get(name, {}), allowed, problems)
+
+    meta = section(lambda: table("case", _CASE))
+    name = section(lambda: meta.string("name", path.stem)) if meta else path.stem
+    description = section(lambda: meta.string("description", "")) if meta else ""
+    model = section(lambda: _read_model(path, table("model", _MODEL)))
+    # a model that cannot be read has any tooth: the sections below report their own problems only
+    present = section(model.present_teeth, ALL_TEETH) if model else ALL_TEETH
+    extractions, duration, step, detector = section(lambda: _read_treatment(table("treatment", _TREATMENT), present),
+                                                    ((), 90.0, 1.0, "continuous"))
+    wire = section(lambda: Wire(table("wire", _WIRE).string("type", "rectangular", WIRES)), Wire())
+    loads = tuple(section(lambda i=i, raw=raw: _read_load(path, i, raw, present, set(extractions), wire, problems))
+                  for i, raw in enumerate(section(lambda: _load_tables(top), [])))
+    simulation = section(lambda: _read_simulation(table("simulation", _SIMULATION)))
+    staging = section(lambda: read_case_staging(path, data, present, set(extractions)))
+    biomechanics = section(lambda: _read_biomechanics(table("biomechanics", _BIOMECHANICS)))
+    occlusion = section(lambda: _read_occlusion(table("occlusion", _OCCLUSION)))
+    if problems:
+        return None, problems
+    return Case(path, name, description, model, extractions, loads, wire, duration, step, detector, simulation, staging,
+                biomechanics, occlusion), []
+
+
+ALL_TEETH = frozenset(10 * q + p for q in F.QUADRANTS for p in range(1, 9))
+
+
+def _load_tables(top: FieldReader) -> list:
+    raw_loads = top.get("loads", [])
+    if not isinstance(raw_loads, list):
+        top.fail("loads", "must be an array of tables", "write each load as [[loads]]")
+    return raw_loads
+
+
+def _read_treatment(treat: FieldReader, present: set[int]) -> tuple[tuple[int, ...], float, float, str]:
+    """(extractions, duration_days, step_days, detector) of the [treatment] table."""
     raw_ext = treat.get("extractions", [])
     if not isinstance(raw_ext, list):
         treat.fail("extractions", f"must be a list of FDI numbers, got {raw_ext!r}", "write e.g. [14, 24]")
@@ -308,21 +369,7 @@ def load_case(path: str | Path) -> Case:
                    "use a step no longer than duration_days")
     if duration / step > 100_000:
         treat.fail("step_days", f"{duration / step:.0f} steps is more than 100000", "use a longer step")
-    detector = treat.string("detector", "continuous", DETECTORS)
-
-    wire = Wire(FieldReader(path, "wire", top.get("wire", {}), _WIRE).string("type", "rectangular", WIRES))
-
-    raw_loads = top.get("loads", [])
-    if not isinstance(raw_loads, list):
-        top.fail("loads", "must be an array of tables", "write each load as [[loads]]")
-    loads = tuple(_read_load(path, i, raw, present, set(extractions), wire) for i, raw in enumerate(raw_loads))
-    simulation = _read_simulation(FieldReader(path, "simulation", top.get("simulation", {}), _SIMULATION))
-
-    staging = read_case_staging(path, data, present, set(extractions))
-    biomechanics = _read_biomechanics(FieldReader(path, "biomechanics", top.get("biomechanics", {}), _BIOMECHANICS))
-    occlusion = _read_occlusion(FieldReader(path, "occlusion", top.get("occlusion", {}), _OCCLUSION))
-    return Case(path, name, description, model, tuple(extractions), loads, wire, duration, step, detector, simulation, staging,
-                biomechanics, occlusion)
+    return tuple(extractions), duration, step, treat.string("detector", "continuous", DETECTORS)
 
 
 def _read_biomechanics(r: FieldReader) -> Biomechanics:
@@ -508,8 +555,9 @@ def _shared_data_fallback(raw: str, folder: Path) -> Path:
     return other.resolve() if other.is_dir() else folder
 
 
-def _read_load(path: Path, i: int, raw: Any, present: set[int], extracted: set[int], wire: Wire) -> Load:
-    r = FieldReader(path, f"loads[{i}]", raw, _LOAD)
+def _read_load(path: Path, i: int, raw: Any, present: set[int], extracted: set[int], wire: Wire,
+               problems: list | None = None) -> Load:
+    r = FieldReader(path, f"loads[{i}]", raw, _LOAD, problems)
     teeth_raw = r.get("teeth")
     if isinstance(teeth_raw, int) and not isinstance(teeth_raw, bool):
         teeth_raw = [teeth_raw]

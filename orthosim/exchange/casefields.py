@@ -15,16 +15,23 @@ from orthosim.model import fdi as F
 
 
 class FieldReader:
-    """Typed access to one TOML table, naming the file and the dotted field in every error."""
+    """Typed access to one TOML table, naming the file and the dotted field in every error.
 
-    def __init__(self, path: Path, prefix: str, table: Any, allowed: tuple[str, ...]):
+    problems: where the table's unknown keys go, each its own CaseError, so that a linter lists
+    them all (`orthosim.exchange.case.case_problems`); None: the first unknown key raises."""
+
+    def __init__(self, path: Path, prefix: str, table: Any, allowed: tuple[str, ...],
+                 problems: list[CaseError] | None = None):
         self.path, self.prefix = path, prefix
         if not isinstance(table, dict):
             self.fail(None, f"must be a table, got {type(table).__name__}", f"write it as [{prefix}]")
         self.table = table
         for key in table:
             if key not in allowed:
-                self.fail(key, "unknown key", f"expected one of: {', '.join(allowed)}")
+                error = CaseError(self.path, self.name(key), "unknown key", f"expected one of: {', '.join(allowed)}")
+                if problems is None:
+                    raise error
+                problems.append(error)
 
     def name(self, key: str | None) -> str:
         return self.prefix if key is None else (f"{self.prefix}.{key}" if self.prefix else key)

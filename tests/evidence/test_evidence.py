@@ -140,7 +140,8 @@ def test_a_bad_biomechanics_table_is_one_line_naming_the_file_and_field_with_exi
     done = orthosim("check", str(path))
     assert done.returncode == 2
     lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and str(path) in lines[0] and field in lines[0] and words in lines[0], lines
+    section, key = field.split(".")
+    assert len(lines) == 1 and str(path) in lines[0] and f"[{section}] {key}:" in lines[0] and words in lines[0], lines
     assert "Traceback" not in done.stderr
 
 
