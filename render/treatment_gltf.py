@@ -38,7 +38,7 @@ from orthosim_render.scene import (CONTACT_COLOR, CROWN_COLOR, ESTIMATED_ROOT_CO
 
 MM = 0.001  # metres per millimetre
 STEP_SECONDS = 0.25  # animation seconds per keyframe in other glTF players (the page has its own slider)
-CONTACT_MARKER_RADIUS_MM = 0.6  # one marker per touching pair: a sphere this size at the contact centre
+CONTACT_MARKER_RADIUS_MM = 1.0  # one marker per touching pair: a sphere this size at the contact centre (shows past the teeth)
 SCENE_FORMAT = "orthosim-scene/1"
 MAX_GLB_BYTES = 30_000_000  # a scene over this is simplified (issue 41: the page must stay interactive)
 NEAR_MM = 3.0  # a contact sphere farther than this from a tooth is not that tooth's contact

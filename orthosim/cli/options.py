@@ -85,6 +85,8 @@ def render_options(f):
                      help="Also write each view's own PNG per frame (frames/<view>/NNNNN.png) besides the tiled frame.")(f)
     f = click.option("--export-scene", type=click.Choice(["glb", "ply"]), default=None,
                      help="Write the posed teeth at --export-steps for Blender, MeshLab or Open3D (scene/).")(f)
+    f = click.option("--no-animation", is_flag=True,
+                     help="Write no animation.glb (the steps as one animated glTF scene) nor viewer.html (its 3D page).")(f)
     f = click.option("--export-steps", default=None, callback=parse_steps,
                      help="Steps to export with --export-scene, comma-separated (default: first and last).")(f)
     f = click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors and warnings.")(f)
@@ -122,6 +124,7 @@ def run_options(detector: str | None, opts: dict) -> RunOptions:
                       labels=get("labels", d.labels), overlay=not get("no_overlay", False),
                       frames_per_step=get("frames_per_step"), seconds=get("seconds"), fps=get("fps", d.fps),
                       split_views=get("split_views", d.split_views), export_scene=get("export_scene"),
-                      export_steps=get("export_steps"), simulate_in_process=get("simulate_in_process", False),
+                      export_steps=get("export_steps"), animation_scene=not get("no_animation", False),
+                      simulate_in_process=get("simulate_in_process", False),
                       single_core=get("single_core", False), gl=get("gl"),
                       verbosity=0 if get("quiet") else 2 if get("verbose") else 1)

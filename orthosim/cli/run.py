@@ -92,8 +92,18 @@ def _render_steps(dent, records, out_dir: Path, options: RunOptions, *, extracte
 
     caption = FrameCaption(case.name, options.detector, case.step_days, case.duration_days, labels=options.labels,
                            extra_legend=model_legend(dent, options.hide_roots)) if options.overlay else None
-    frames = frames_from_steps(records, extracted, per_step)
-    return render_run(dent, frames, out_dir, views=options.views, size=options.size, gif=options.gif, alpha=options.alpha,
-                      hide_roots=options.hide_roots, color_contact_faces=options.contact_faces, fps=options.fps,
-                      split_views=options.split_views, total=total, progress=progress,
-                      exact_contact_faces=options.contact_faces_exact, caption=caption, single_core=options.single_core)
+    scene = _scene_recorder(dent, extracted) if options.animation_scene else None
+    frames = frames_from_steps(scene.watch(records) if scene else records, extracted, per_step)
+    rendered = render_run(dent, frames, out_dir, views=options.views, size=options.size, gif=options.gif, alpha=options.alpha,
+                          hide_roots=options.hide_roots, color_contact_faces=options.contact_faces, fps=options.fps,
+                          split_views=options.split_views, total=total, progress=progress,
+                          exact_contact_faces=options.contact_faces_exact, caption=caption, single_core=options.single_core)
+    if scene is not None:  # the steps as one animated glTF scene and its 3D page (orthosim_render.viewer_page)
+        rendered["outputs"].update({k: p.name for k, p in scene.write(out_dir, title=case.name).items()})
+    return rendered
+
+
+def _scene_recorder(dent, extracted):
+    from orthosim_render.viewer_page import SceneRecorder
+
+    return SceneRecorder(dent, extracted)

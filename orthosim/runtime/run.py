@@ -48,6 +48,7 @@ class RunOptions:
     frames_per_step / seconds: animation frames per simulation step, or the animation's length in
         seconds (at `fps`); neither: at least MIN_ANIMATION_S seconds.
     export_scene: "glb" or "ply": the posed teeth at `export_steps` (default: first and last step).
+    animation_scene: a run that draws also writes animation.glb (every step a keyframe) and viewer.html.
     verbosity: 0 quiet (errors and warnings only), 1 normal (phase lines and bars on a terminal,
         the summary line), 2 verbose (phase lines wherever the output goes).
     """
@@ -69,6 +70,7 @@ class RunOptions:
     split_views: bool = False
     export_scene: str | None = None
     export_steps: tuple[int, ...] | None = None
+    animation_scene: bool = True  # a drawn run also writes animation.glb and viewer.html (--no-animation: not)
     simulate_in_process: bool = False  # batch workers: one per core already, so no simulation child per run
     single_core: bool = False  # batch workers: also simulate, draw and encode on one thread, ffmpeg on one (implies simulate_in_process)
     verbosity: int = 1
