@@ -140,9 +140,10 @@ def _indices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     return np.asarray(faces, np.uint16 if n_vertices < 65536 else np.uint32).reshape(-1)
 
 
-def _tooth_meshes(builder: GltfBuilder, fdi: int, tooth, materials: _Materials) -> tuple[int, int]:
-    """(still mesh, moving mesh) of one tooth: crown and root primitives over one vertex buffer (metres)."""
-    mesh = tooth.mesh
+def _tooth_meshes(builder: GltfBuilder, fdi: int, tooth, materials: _Materials, shape=None) -> tuple[int, int]:
+    """(still mesh, moving mesh) of one tooth: crown and root primitives over one vertex buffer (metres).
+    shape: (mesh, face_part) to show instead of the tooth model's own (a staging's stage models)."""
+    mesh, face_part = shape if shape is not None else (tooth.mesh, tooth.face_part)
     positions = builder.accessor(np.asarray(mesh.vertices, np.float32) * np.float32(MM), ARRAY_BUFFER, bounds=True)
     normals = np.array(mesh.vertex_normals, np.float64)
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
@@ -150,7 +151,7 @@ def _tooth_meshes(builder: GltfBuilder, fdi: int, tooth, materials: _Materials) 
     parts = []
     root = "estimated root" if tooth.root_kind == "estimated" else "root"
     for part, material in ((CROWN, "crown"), (1 - CROWN, root)):
-        faces = np.asarray(mesh.faces)[np.asarray(tooth.face_part) == part]
+        faces = np.asarray(mesh.faces)[np.asarray(face_part) == part]
         if len(faces):
             parts.append((material, builder.accessor(_indices(faces, len(mesh.vertices)), ELEMENT_ARRAY_BUFFER)))
 
@@ -211,9 +212,9 @@ def _shown(flags: np.ndarray) -> np.ndarray:
     return np.repeat(flags.astype(np.float32)[:, None], 3, axis=1)
 
 
-def _add_tooth(builder, animation: _Animation, fdi: int, tooth, keyframes, materials) -> int:
+def _add_tooth(builder, animation: _Animation, fdi: int, tooth, keyframes, materials, shape=None) -> int:
     """The tooth's node (pose keyframes; scaled out where hidden) and its still and moving children."""
-    still_mesh, moving_mesh = _tooth_meshes(builder, fdi, tooth, materials)
+    still_mesh, moving_mesh = _tooth_meshes(builder, fdi, tooth, materials, shape)
     poses = np.stack([np.asarray(k.poses.get(fdi, tooth.rest_pose), float) for k in keyframes])
     translation = poses[:, :3, 3] * MM
     rotation = quaternion_xyzw(poses[:, :3, :3])
@@ -283,16 +284,20 @@ def view_frames(dentition) -> dict[str, dict]:
     return out
 
 
-def treatment_glb(dentition, keyframes: Sequence[SceneKeyframe], *, title: str, timeline: str = "day") -> bytes:
+def treatment_glb(dentition, keyframes: Sequence[SceneKeyframe], *, title: str, timeline: str = "day",
+                  shapes: Mapping[int, tuple] | None = None) -> bytes:
     """The animated scene of `keyframes` (at least one) as GLB bytes (see the module doc).
-    timeline: what the page's slider counts, "day" (a run) or "stage" (a staging)."""
+    timeline: what the page's slider counts, "day" (a run) or "stage" (a staging).
+    shapes: FDI -> (mesh, face_part) shown instead of the tooth model's (local frame, mm)."""
+    shapes = shapes or {}
     if not keyframes:
         raise ValueError("a treatment scene needs at least one keyframe")
     builder = GltfBuilder()
     builder.doc["asset"]["extras"] = {"title": title}
     materials = _Materials(builder)
     animation = _Animation(builder, len(keyframes))
-    roots = [_add_tooth(builder, animation, n, dentition.teeth[n], keyframes, materials) for n in dentition.fdis]
+    roots = [_add_tooth(builder, animation, n, dentition.teeth[n], keyframes, materials, shapes.get(n))
+             for n in dentition.fdis]
     for name, gum in sorted(dentition.gingiva.items()):
         mesh = _gum_mesh(builder, name, gum, materials["gingiva"])
         roots.append(builder.add("nodes", {"name": f"gingiva_{name}", "mesh": mesh,

@@ -89,10 +89,11 @@ def viewer_html(glb: bytes, dentition, title: str, timeline: str = "day") -> str
 
 
 def write_viewer(out_dir: str | Path, dentition, keyframes: Sequence[SceneKeyframe], title: str,
-                 timeline: str = "day") -> dict[str, Path]:
-    """Write out_dir/animation.glb and out_dir/viewer.html (atomically); returns {"glb": path, "viewer": path}."""
+                 timeline: str = "day", shapes=None) -> dict[str, Path]:
+    """Write out_dir/animation.glb and out_dir/viewer.html (atomically); returns {"glb": path, "viewer": path}.
+    shapes: FDI -> (mesh, face_part) shown instead of the tooth models (`treatment_glb`)."""
     out_dir = Path(out_dir)
-    glb = treatment_glb(dentition, keyframes, title=title, timeline=timeline)
+    glb = treatment_glb(dentition, keyframes, title=title, timeline=timeline, shapes=shapes)
     write_bytes(out_dir / GLB_NAME, glb)
     write_text(out_dir / PAGE_NAME, viewer_html(glb, dentition, title, timeline))
     return {"glb": out_dir / GLB_NAME, "viewer": out_dir / PAGE_NAME}
@@ -115,3 +116,44 @@ class SceneRecorder:
 
     def write(self, out_dir: str | Path, title: str) -> dict[str, Path]:
         return write_viewer(out_dir, self.dentition, self.keyframes, title)
+
+
+# ------------------------------------------------------------------------------------------ a staging
+def stage_shapes(run) -> dict[int, tuple]:
+    """Each staged tooth's mesh as the stage models give it (`orthosim.staging.models.printable`, the
+    one place a stage model's tooth is made), with its faces' crown/root parts (local frame, mm)."""
+    from orthosim.model.tooth import part_of_faces
+    from orthosim.staging.models import printable
+
+    shapes = {}
+    for n in run.plan.teeth:
+        mesh = printable(run.dentition.teeth[n].mesh)
+        shapes[n] = (mesh, part_of_faces(mesh))
+    return shapes
+
+
+def staging_keyframes(run) -> list[SceneKeyframe]:
+    """One keyframe per stage (0 = the start): the stage's poses, the teeth moving in it, and a marker
+    per pair where interproximal reduction removes enamel (`staging.caseplan.ipr_contact_points`).
+    Teeth the plan does not stage are hidden, as in the staging's frames."""
+    from orthosim.staging.caseplan import ipr_contact_points
+
+    plan, dent = run.plan, run.dentition
+    hidden = frozenset(n for n in dent.fdis if n not in plan.teeth)
+    rest = dent.rest_poses()
+    locator = ContactLocator(dent)
+    out = []
+    for k in range(plan.n_stages + 1):
+        poses = {**rest, **plan.poses(k)}
+        moving = frozenset() if k == 0 else frozenset(
+            n for i, n in enumerate(plan.teeth) if plan.progress[k][i] > plan.progress[k - 1][i])
+        points, pairs = ipr_contact_points(run, k) if plan.ipr else (None, ())
+        contacts = locator.markers(poses, pairs, points) if pairs else ()
+        out.append(SceneKeyframe(k, float(k), poses, hidden, moving, contacts))
+    return out
+
+
+def write_staging_viewer(run, out_dir: str | Path) -> dict[str, Path]:
+    """animation.glb (the stages as keyframes, the stage models' meshes) and viewer.html of a staging."""
+    return write_viewer(out_dir, run.dentition, staging_keyframes(run), run.case.name,
+                        timeline="stage", shapes=stage_shapes(run))
