@@ -248,3 +248,21 @@ def test_contacts_of_a_step_are_grouped_into_one_marker_per_pair(dentition):
     assert [m.pair for m in markers] == [(11, 21), (13, 14)]
     assert np.allclose(markers[0].center_mm, spheres[:2].mean(axis=0))
     assert np.allclose(markers[1].center_mm, spheres[2:].mean(axis=0))
+
+
+def test_export_scene_glb_is_in_metres_with_each_tooth_at_its_pose(dentition, tmp_path):
+    """`--export-scene glb` changed from millimetres to metres (README): a tooth's posed vertices
+    read back by trimesh are the model's posed vertices x 0.001."""
+    import trimesh
+    from types import SimpleNamespace
+
+    from orthosim.exchange.scene_export import export_scenes
+
+    rest = dentition.rest_poses()
+    poses = {**rest, 13: _turned(rest[13], 10.0, [1.0, 0.0, 0.0])}
+    (path,) = export_scenes(dentition, [SimpleNamespace(step=3, poses=poses)], {14}, tmp_path, "glb")
+    scene = trimesh.load(path)
+    assert "tooth_14" not in scene.graph.nodes
+    posed = scene.geometry["tooth_13"].copy().apply_transform(scene.graph.get("tooth_13")[0]).vertices
+    want = dentition.teeth[13].to_world(dentition.teeth[13].mesh.vertices, poses[13]) * MM
+    assert np.abs(posed - want).max() < 1e-9
