@@ -14,6 +14,10 @@ when something first draws, in `offscreen_backend`, and only then is PYOPENGL_PL
 - Pictures and pages: `occlusion_figure` (occlusal contacts drawn), `staging` and `staging_page`
   (a staging's animation and page), `evidence_page` (the evidence table's page), `report/` (the
   contact-area report).
+- 3D scenes and the interactive page: `gltf` (a glTF 2.0 binary written and read with numpy and
+  struct), `treatment_gltf` (a treatment as one animated glTF scene, `animation.glb`), `viewer_page`
+  (`viewer.html`: the scene embedded in a WebGL2 page, its code and shaders in `viewer/`),
+  `viewer_check` (the page opened in headless Chromium, its id picture against the label pass).
 - Image regression: `imgdiff` (a render against its golden), `imageerrors` (its one-line errors),
   `regression` (a case's step drawn for a test), `semantic_labels` (what each pixel shows), `explain`
   (what changed, tooth by tooth), `pytest_plugin` (the `orthosim_image_regression` fixture).

@@ -218,8 +218,9 @@ def render_page(data: dict) -> str:
 
 
 def write_staging_page(run, certificate: dict, out_dir: str | Path, pictures: bool = True,
-                       size: tuple[int, int] = PICTURE_SIZE) -> Path:
-    """Write charts/staging_chart.png, charts/ipr_chart.png and index.html into out_dir; returns the page."""
+                       size: tuple[int, int] = PICTURE_SIZE, viewer: bool = False) -> Path:
+    """Write charts/staging_chart.png, charts/ipr_chart.png and index.html into out_dir; returns the page.
+    viewer: the page embeds viewer.html, the staging's 3D page written beside it (`orthosim_render.viewer_page`)."""
     out_dir = Path(out_dir)
     charts = {"staging": staging_chart_png(run.plan), "ipr": ipr_chart_png(run.dentition, run.plan)}
     for name, png in charts.items():
@@ -229,5 +230,5 @@ def write_staging_page(run, certificate: dict, out_dir: str | Path, pictures: bo
         for view, png in views.items():
             write_bytes(out_dir / "charts" / f"stage_{k:02d}_{view}.png", png)
     page = out_dir / "index.html"
-    write_text(page, render_page(page_data(run, certificate, charts, shots)))
+    write_text(page, render_page({**page_data(run, certificate, charts, shots), "viewer": "viewer.html" if viewer else None}))
     return page

@@ -49,6 +49,12 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     .venv/bin/uv pip install -q --compile-bytecode --python .venv/bin/python -e ".$extra"
     touch "$stamp"
 fi
+# the Khronos glTF validator, for the tests of animation.glb (tests/gltf_validator_helpers.py, which pins
+# the same version): into .venv/npm, ignored by git; a machine without node/npm or registry skips those tests
+if [ "$action" != demo ] && command -v npm >/dev/null 2>&1 && [ ! -f .venv/npm/node_modules/gltf-validator/package.json ]; then
+    npm install --prefix .venv/npm --no-audit --no-fund --silent gltf-validator@2.0.0-dev.3.10 >/dev/null 2>&1 \
+        || echo "dev.sh: npm could not install gltf-validator; its tests will skip"
+fi
 # our own sources are an editable install, which uv does not compile: without their .pyc files every
 # process compiles orthosim and render again (0.19 s of CPU per process, measured); up-to-date files are skipped
 .venv/bin/python -m compileall -q orthosim render bench >/dev/null

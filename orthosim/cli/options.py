@@ -86,6 +86,8 @@ def render_options(f):
                      help="Also write each view's own PNG per frame (frames/<view>/NNNNN.png) besides the tiled frame.")(f)
     f = click.option("--export-scene", type=click.Choice(["glb", "ply"]), default=None,
                      help="Write the posed teeth at --export-steps for Blender, MeshLab or Open3D (scene/).")(f)
+    f = click.option("--no-animation", is_flag=True,
+                     help="Write no animation.glb (the steps as one animated glTF scene) nor viewer.html (its 3D page).")(f)
     f = click.option("--export-steps", default=None, callback=parse_steps,
                      help="Steps to export with --export-scene, comma-separated (default: first and last).")(f)
     f = click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors and warnings.")(f)
@@ -121,7 +123,8 @@ def run_options(detector: str | None, flags: dict, **chosen) -> RunOptions:
         hide_roots=flags["hide_roots"], contact_faces=flags["contact_faces"],
         contact_faces_exact=flags["contact_faces_exact"], labels=flags["labels"], overlay=not flags["no_overlay"],
         frames_per_step=flags["frames_per_step"], seconds=flags["seconds"], fps=flags["fps"],
-        split_views=flags["split_views"], gl=flags["gl"])
+        split_views=flags["split_views"], gl=flags["gl"],
+        animation_scene=not flags["no_animation"])
     return RunOptions(detector=detector, render=render, export_scene=flags["export_scene"],
                       export_steps=flags["export_steps"], verbosity=0 if flags["quiet"] else 2 if flags["verbose"] else 1,
                       **chosen)

@@ -94,5 +94,15 @@ def _render_steps(dent, records, out_dir: Path, options: RunOptions, *, extracte
     render = options.render
     caption = FrameCaption(case.name, options.detector, case.step_days, case.duration_days, labels=render.labels,
                            extra_legend=model_legend(dent, render.hide_roots)) if render.overlay else None
-    frames = frames_from_steps(records, extracted, per_step)
-    return render_run(dent, frames, out_dir, render, total=total, progress=progress, caption=caption)
+    scene = _scene_recorder(dent, extracted) if render.animation_scene else None
+    frames = frames_from_steps(scene.watch(records) if scene else records, extracted, per_step)
+    rendered = render_run(dent, frames, out_dir, render, total=total, progress=progress, caption=caption)
+    if scene is not None:  # the steps as one animated glTF scene and its 3D page (orthosim_render.viewer_page)
+        rendered["outputs"].update({k: p.name for k, p in scene.write(out_dir, title=case.name).items()})
+    return rendered
+
+
+def _scene_recorder(dent, extracted):
+    from orthosim_render.viewer_page import SceneRecorder
+
+    return SceneRecorder(dent, extracted)

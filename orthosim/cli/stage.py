@@ -84,6 +84,9 @@ def _stage_into(case: Path, out: Path, limits, views, size, frames_per_stage: in
         from orthosim_render.staging import render_staging
 
         extra["animation"] = render_staging(run, out, views=views, size=size, frames_per_stage=frames_per_stage, gif=gif)
+        from orthosim_render.viewer_page import write_staging_viewer
+
+        extra["scene"] = {k: p.name for k, p in write_staging_viewer(run, out).items()}
     write_outputs(run.plan, out, case)
     record = certificate_record(certify(run.plan, run.dentition), Path(case).resolve(), file_sha256(case))
     write_json(out / "certificate.json", record)
@@ -92,7 +95,7 @@ def _stage_into(case: Path, out: Path, limits, views, size, frames_per_stage: in
 
         plan = run.plan
         export_stage_models(run.dentition, [plan.poses(k) for k in range(plan.n_stages + 1)], out / "models", export)
-    write_staging_page(run, record, out, pictures=views is not None)
+    write_staging_page(run, record, out, pictures=views is not None, viewer=views is not None)
     write_run_record(out, case, "continuous", extra)  # last: marks the folder finished
     return run, record["summary"]
 

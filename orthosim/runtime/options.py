@@ -37,6 +37,7 @@ class RenderOptions:
     single_core: draw and encode on the calling thread, ffmpeg on one thread (a batch worker, one
         per core); a run alone wants the pipeline, which keeps more than one core busy.
     gl: the offscreen OpenGL backend asked for: "auto", "egl", "osmesa"; None: $ORTHOSIM_GL, else auto.
+    animation_scene: also write animation.glb (every step a keyframe) and viewer.html (--no-animation: not).
     """
 
     views: tuple[str, ...] = ("frontal",)
@@ -56,6 +57,7 @@ class RenderOptions:
     split_views: bool = False
     single_core: bool = False
     gl: str | None = None
+    animation_scene: bool = True
 
 
 @dataclass(frozen=True)

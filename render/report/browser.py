@@ -56,6 +56,7 @@ class PageLoad:
     images: int = 0
     screenshot_png: bytes = b""
     pdf: bytes = b""
+    value: object = None  # what `evaluate` gave, when asked
 
     @property
     def problems(self) -> list[str]:
@@ -66,7 +67,7 @@ class PageLoad:
 class _DevTools:
     """One Chromium process and its DevTools pipe."""
 
-    def __init__(self, window: tuple[int, int], timeout_s: float):
+    def __init__(self, window: tuple[int, int], timeout_s: float, extra_flags: tuple[str, ...] = ()):
         self.timeout_s = timeout_s
         self.profile = tempfile.TemporaryDirectory(prefix="orthosim-chromium-")
         to_child_r, self._to_child = os.pipe()
@@ -81,7 +82,7 @@ class _DevTools:
             os.dup2(r, 3)
             os.dup2(w, 4)
 
-        cmd = [find_chromium(), *FLAGS, f"--user-data-dir={self.profile.name}", "--remote-debugging-pipe",
+        cmd = [find_chromium(), *FLAGS, *extra_flags, f"--user-data-dir={self.profile.name}", "--remote-debugging-pipe",
                f"--window-size={window[0]},{window[1]}", "about:blank"]
         self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                      close_fds=False, preexec_fn=wire)
@@ -149,12 +150,14 @@ class _DevTools:
 
 
 def load_page(page: str | Path, *, screenshot: bool = True, pdf: bool = False, window: tuple[int, int] = (1400, 1800),
-              timeout_s: float = 60.0) -> PageLoad:
-    """Open the local file `page` in headless Chromium and report what a reader would meet."""
+              timeout_s: float = 60.0, fragment: str = "", extra_flags: tuple[str, ...] = (),
+              evaluate: str | None = None) -> PageLoad:
+    """Open the local file `page` (with `#fragment` when given) in headless Chromium and report what a
+    reader would meet; `evaluate`: a JavaScript expression whose value, once loaded, is kept in `value`."""
     page = Path(page).resolve()
-    url = page.as_uri()
+    url = page.as_uri() + (f"#{fragment}" if fragment else "")
     result = PageLoad(url)
-    tools = _DevTools(window, timeout_s)
+    tools = _DevTools(window, timeout_s, extra_flags)
     try:
         target = tools.send("Target.createTarget", {"url": "about:blank"}, session=False)["targetId"]
         tools.session = tools.send("Target.attachToTarget", {"targetId": target, "flatten": True}, session=False)["sessionId"]
@@ -168,6 +171,8 @@ def load_page(page: str | Path, *, screenshot: bool = True, pdf: bool = False, w
             "returnByValue": True})
         info = json.loads(status["result"]["value"])
         result.images, result.broken_images = int(info["n"]), list(info["broken"])
+        if evaluate is not None:
+            result.value = tools.send("Runtime.evaluate", {"expression": evaluate, "returnByValue": True})["result"].get("value")
         if screenshot:
             shot = tools.send("Page.captureScreenshot", {"format": "png"})
             result.screenshot_png = base64.b64decode(shot["data"])

@@ -1,0 +1,106 @@
+"""viewer.html in a real browser: headless Chromium (WebGL2 through SwiftShader) opens the page of
+case 3's run and of the crowding staging from a file:// URL, with no network and no console error,
+and at a given step and named view its per-tooth id picture agrees with orthosim's offscreen label
+pass of the same step and view at 320x240: the same teeth visible, each centroid within 3 px.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from cli_helpers import orthosim
+from orthosim_render.frame_state import FrameState
+from orthosim_render.report.browser import NAMES
+from orthosim_render.viewer_check import disagreements, label_picture, open_viewer
+
+ROOT = Path(__file__).resolve().parents[2]
+CASE3 = ROOT / "cases" / "case3_incisor_space_closure.toml"
+CROWDING = ROOT / "cases" / "staging_lower_incisor_crowding.toml"
+SIZE = (320, 240)
+MAX_PX = 3.0
+
+pytestmark = pytest.mark.slow  # Chromium, end-to-end runs
+
+
+@pytest.fixture(scope="module", autouse=True)
+def chromium():
+    if not any(shutil.which(n) for n in NAMES):
+        pytest.fail("headless Chromium is not installed: run `bash tools/dev.sh install`")
+
+
+@pytest.fixture(scope="module")
+def case3(tmp_path_factory):
+    """Case 3 run by `orthosim run` and its step records (the same simulation, in process)."""
+    from orthosim.exchange.case import load_case
+    from orthosim.runtime.strategies import step_records
+
+    out = tmp_path_factory.mktemp("case3") / "run"
+    r = orthosim("run", CASE3, "--out", out, "--frames-per-step", "1", "--size", "160x120")
+    assert r.returncode == 0, r.stderr
+    case = load_case(CASE3)
+    with step_records(case, case.detector, in_process=True) as source:
+        records = list(source.records)
+        dentition = source.dentition
+    return out, dentition, records, frozenset(case.extractions)
+
+
+@pytest.fixture(scope="module")
+def crowding(tmp_path_factory):
+    """The crowding case staged by `orthosim stage`, and its plan."""
+    from orthosim.staging.caseplan import plan_case
+    from orthosim_render.viewer_page import staging_keyframes
+
+    out = tmp_path_factory.mktemp("crowding") / "out"
+    r = orthosim("stage", CROWDING, "--out", out, "--frames-per-stage", "1", "--size", "160x120")
+    assert r.returncode == 0, r.stderr
+    run = plan_case(CROWDING)
+    return out, run.dentition, staging_keyframes(run)
+
+
+@pytest.mark.parametrize("which, view", [("first", "frontal"), ("last", "frontal"), ("last", "maxillary_occlusal"),
+                                         ("last", "right_buccal")])
+def test_case3s_page_draws_each_tooth_where_the_frames_draw_it(case3, which, view):
+    out, dentition, records, extracted = case3
+    record = records[0] if which == "first" else records[-1]
+    load = open_viewer(out / "viewer.html", step=record.step, view=view, size=SIZE)
+    assert load.errors == []
+    reference = label_picture(dentition, FrameState.from_step(record, extracted), view, SIZE)
+    assert load.picture.visible(20) == reference.visible(20) and len(reference.visible(20)) >= 10
+    assert disagreements(load.picture, reference, max_px=MAX_PX) == []
+
+
+@pytest.mark.parametrize("view", ["frontal", "mandibular_occlusal"])
+def test_the_crowding_stagings_page_draws_its_middle_stage_where_the_frames_draw_it(crowding, view):
+    out, dentition, keyframes = crowding
+    middle = keyframes[len(keyframes) // 2]
+    load = open_viewer(out / "viewer.html", step=middle.step, view=view, size=SIZE)
+    assert load.errors == []
+    reference = label_picture(dentition, FrameState(poses=middle.poses, extracted=middle.hidden), view, SIZE)
+    assert load.picture.visible(20) == reference.visible(20) and len(reference.visible(20)) >= 10
+    assert disagreements(load.picture, reference, max_px=MAX_PX) == []
+
+
+def test_a_moved_tooth_is_caught(case3):
+    """The comparison fails when the page shows another step: the claim can fail."""
+    out, dentition, records, extracted = case3
+    load = open_viewer(out / "viewer.html", step=0, view="frontal", size=SIZE)
+    shifted = {n: p.copy() for n, p in records[0].poses.items()}
+    shifted[11][:3, 3] += [1.5, 0.0, 0.0]  # 1.5 mm toward the patient's left: several pixels at 320x240
+    reference = label_picture(dentition, FrameState(poses=shifted, extracted=extracted), "frontal", SIZE)
+    assert any(p.startswith("tooth 11:") for p in disagreements(load.picture, reference, max_px=MAX_PX))
+
+
+def test_the_pages_open_offline_and_the_staging_page_embeds_its_viewer(case3, crowding):
+    from orthosim_render.report.browser import load_page
+    from orthosim_render.viewer_check import WEBGL_FLAGS
+
+    for page in (case3[0] / "viewer.html", crowding[0] / "viewer.html"):
+        load = open_viewer(page, test=False)
+        assert load.errors == [] and load.drawn_ms is not None
+        assert "http:" not in page.read_text() and "https:" not in page.read_text()
+    index = load_page(crowding[0] / "index.html", extra_flags=WEBGL_FLAGS, screenshot=False)
+    assert index.problems == [] and index.network_requests == []
+    assert '<iframe src="viewer.html"' in (crowding[0] / "index.html").read_text()
