@@ -33,6 +33,7 @@ FAST_TEST_BUDGET_S = 2.0
 _fast_seconds: dict[str, float] = {}
 _outcomes: dict[str, str] = {}
 _damaged_entries: dict[str, int] = {}  # kind of cache entry -> damaged copies a test loaded (tests/storage/test_damaged_entries.py)
+_edited_certificates: dict[str, int] = {}  # kind of certified figure -> edited certificates verify was shown (tests/staging/)
 
 
 @pytest.fixture
@@ -43,6 +44,15 @@ def damage_tally(request) -> dict[str, int]:
     tally: dict[str, int] = {}
     yield tally
     request.node.user_properties.append(("damaged_entries", dict(tally)))
+
+
+@pytest.fixture
+def edit_tally(request) -> dict[str, int]:
+    """Where a test counts the edited certificates it showed `stage verify`'s comparison, by kind of
+    figure edited; the run's summary prints the counts (carried as `damage_tally`'s are)."""
+    tally: dict[str, int] = {}
+    yield tally
+    request.node.user_properties.append(("edited_certificates", dict(tally)))
 
 
 def pytest_sessionstart(session):
@@ -83,9 +93,9 @@ def pytest_runtest_logreport(report):
         _fast_seconds[report.nodeid] = _fast_seconds.get(report.nodeid, 0.0) + report.duration
     if report.when == "teardown":
         for name, tally in report.user_properties:
-            if name == "damaged_entries":
-                for kind, n in tally.items():
-                    _damaged_entries[kind] = _damaged_entries.get(kind, 0) + n
+            counts = {"damaged_entries": _damaged_entries, "edited_certificates": _edited_certificates}.get(name)
+            for kind, n in tally.items() if counts is not None else ():
+                counts[kind] = counts.get(kind, 0) + n
     if "real_data" in report.keywords and (report.when == "call" or report.skipped):
         if hasattr(report, "wasxfail"):  # a known failure that ran (pytest reports it as skipped)
             _outcomes[report.nodeid] = "xfailed" if report.skipped else "passed"
@@ -107,3 +117,7 @@ def pytest_terminal_summary(terminalreporter):
     if _damaged_entries:
         tried = ", ".join(f"{kind} {n}" for kind, n in sorted(_damaged_entries.items()))
         terminalreporter.write_line(f"damaged cache entries tried: {sum(_damaged_entries.values())} ({tried})")
+    if _edited_certificates:
+        tried = ", ".join(f"{kind} {n}" for kind, n in sorted(_edited_certificates.items()))
+        terminalreporter.write_line(f"edited certificates tried: "
+                                    f"{sum(_edited_certificates.values())} ({tried})")

@@ -63,6 +63,21 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
     click.echo(f"orthosim: warning: {text}", err=True)
 
 
+def click_error_line(err: click.ClickException) -> str:
+    """A click error on one line, in the form of every other error: `--gl: 'vulkan' is not one of
+    auto, egl, osmesa` for a value a parameter refuses; click's own message, whitespace folded,
+    for the rest (an unknown option or command, a missing argument)."""
+    if isinstance(err, click.BadParameter) and not isinstance(err, click.MissingParameter) and err.param is not None:
+        param = err.param
+        name = param.opts[-1] if isinstance(param, click.Option) else param.human_readable_name
+        message = err.message
+        if isinstance(param.type, click.Choice):  # click quotes each choice: listed plain, as the help lists them
+            value = message.split(" is not one of ", 1)[0]
+            message = f"{value} is not one of {', '.join(map(str, param.type.choices))}"
+        return f"{name}: {' '.join(message.split()).rstrip('.')}"
+    return " ".join(err.format_message().split()).rstrip(".")
+
+
 def entry() -> None:
     """Console-script entry: run the CLI, turning user errors into one line and an exit code."""
     import warnings
@@ -84,8 +99,11 @@ def entry() -> None:
     except click.exceptions.Abort:
         click.echo("orthosim: terminated" if terminated() else "orthosim: aborted", err=True)
         sys.exit(143 if terminated() else 130)
-    except click.ClickException as err:
+    except click.exceptions.NoArgsIsHelpError as err:  # `orthosim`, `orthosim stage` alone: the help, as click shows it
         err.show()
+        sys.exit(err.exit_code)
+    except click.ClickException as err:  # usage errors (a bad option or value, a missing argument) and file errors
+        click.echo(f"orthosim: error: {click_error_line(err)}", err=True)
         sys.exit(err.exit_code)
     except KeyboardInterrupt:
         click.echo("orthosim: terminated" if terminated() else "orthosim: interrupted", err=True)

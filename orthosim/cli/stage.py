@@ -92,9 +92,12 @@ def _stage_into(case: Path, out: Path, limits, views, size, frames_per_stage: in
     write_json(out / "certificate.json", record)
     if export:
         from orthosim.staging.models import export_stage_models
+        from orthosim.staging.reduction import reduced_meshes
 
         plan = run.plan
-        export_stage_models(run.dentition, [plan.poses(k) for k in range(plan.n_stages + 1)], out / "models", export)
+        reduced = reduced_meshes({n: run.dentition.teeth[n].mesh for n in plan.teeth}, plan.ipr, plan.target)
+        export_stage_models(run.dentition, [plan.poses(k) for k in range(plan.n_stages + 1)], out / "models", export,
+                            teeth=plan.teeth, reduced=reduced)
     write_staging_page(run, record, out, pictures=views is not None, viewer=views is not None)
     write_run_record(out, case, "continuous", extra)  # last: marks the folder finished
     return run, record["summary"]

@@ -58,14 +58,36 @@ def find_shipped_case(name: str) -> ShippedCase:
 def copy_shipped_case(name: str, dest: Path) -> Path:
     """Copy shipped case `name` into folder `dest` (or to the file `dest` when it ends in .toml).
 
-    Never overwrites: an existing target is a CaseError naming it. Written atomically. Returns the
-    path written.
+    Never overwrites: an existing target, or an existing `dest` that is not a folder (whatever its
+    suffix), is a CaseError naming it; the copy is written beside the target and linked in under
+    its name, which fails rather than replace a file that appeared meanwhile. Returns the path written.
     """
-    from orthosim.storage.atomic import write_text
+    import os
+    import tempfile
 
     case = find_shipped_case(name)
-    target = Path(dest) if str(dest).endswith(".toml") else Path(dest) / case.path.name
+    dest = Path(dest)
+    if dest.exists() and not dest.is_dir():
+        raise CaseError(dest, None, "already exists and is not a folder: a copy never overwrites",
+                        "give a folder, or a new file name ending in .toml")
+    target = dest if str(dest).endswith(".toml") else dest / case.path.name
     if target.exists():
         raise CaseError(target, None, "already exists", "give another folder or file name, or remove it first")
-    write_text(target, case.path.read_text())
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        raise CaseError(target.parent, None, "cannot be made a folder (a file stands in its path)",
+                        "give a folder, or a new file name ending in .toml") from None
+    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    mask = os.umask(0)
+    os.umask(mask)
+    try:
+        os.fchmod(fd, 0o666 & ~mask)  # mkstemp makes 0600; a copied case is shared like any written file
+        with os.fdopen(fd, "w") as f:
+            f.write(case.path.read_text())
+        os.link(tmp, target)  # fails on an existing name: never replaces it
+    except FileExistsError:
+        raise CaseError(target, None, "already exists", "give another folder or file name, or remove it first") from None
+    finally:
+        os.unlink(tmp)
     return target

@@ -8,11 +8,13 @@ For every transition (stage k-1 -> k) it lists
     mesh distance, branch and bound on the motion law's speed bound, to `TOLERANCE_MM`) and whether
     the two move relative to each other at all;
   - the interproximal reduction applied before it (all of it before stage 1: `staging.ipr`).
-An IPR pair's clearance is measured with the reduction modelled as `ipr` does it (the two teeth
-moved apart along the contact direction by half the reduction each, plus its clearance).
+From stage 1 on every clearance is measured between the reduced teeth (`staging.reduction`: the
+planned enamel cut off each contact side by a plane), the same teeth the stage models hold.
 The start (stage 0) is certified too: every pair within REACH_MM there, unreduced.
 
-The numbers come from the poses alone; `orthosim stage verify` re-checks them from the written files.
+`certify_stages` computes it from the poses alone, so `orthosim stage verify` recomputes every
+figure from the written files with the same code and compares it with what the file claims,
+within the `TOLERANCES` the file states.
 """
 
 from __future__ import annotations
@@ -24,12 +26,16 @@ import numpy as np
 from orthosim import __version__
 from orthosim.staging.ipr import InterproximalReduction
 from orthosim.staging.limits import StageLimits
+from orthosim.staging.reduction import reduced_meshes
 from orthosim.staging.sweep import ToothBodies, min_clearance
 from orthosim.exchange.target import COMPONENTS, UNITS, movement_components
 
 REACH_MM = 1.0  # pairs that come within this of each other are listed with their clearance
 TOLERANCE_MM = 1e-3  # the true least clearance is within this below the one reported
 LIMIT_SLACK = 1e-7  # mm or degrees: floating-point rounding allowed above a limit
+# how far a recomputed figure may be from the one the file states (certificate.json's `tolerances`):
+# clearances to the branch and bound's tolerance, the rest to the digits they are written with
+TOLERANCES = {"clearance_mm": TOLERANCE_MM, "increment": 1e-6, "ratio": 1e-6, "ipr_mm": 1e-4, "time": 1e-5}
 
 
 @dataclass(frozen=True)
@@ -42,7 +48,7 @@ class PairClearance:
     lower_bound_mm: float  # proven lower bound: min_mm - lower_bound_mm <= TOLERANCE_MM
     time: float  # fraction 0..1 of the stage
     relative_motion: bool  # False: the two keep their relative pose (constant distance)
-    ipr_mm: float = 0.0  # reduction modelled at this contact (0.0: none)
+    ipr_mm: float = 0.0  # reduction planned at this contact, both teeth together (0.0: none, or unreduced)
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,32 +83,49 @@ class Certificate:
         return [(0, c) for c in self.start] + [(t.stage, c) for t in self.transitions for c in t.clearances]
 
 
-def clearances(bodies: ToothBodies, P0: dict, P1: dict, shifted: bool = True) -> tuple[PairClearance, ...]:
-    """Every pair within REACH_MM during the motion P0 -> P1 (FDI -> (4, 4)), with its clearance."""
+def clearances(bodies: ToothBodies, P0: dict, P1: dict, ipr_mm: dict | None = None) -> tuple[PairClearance, ...]:
+    """Every pair within REACH_MM during the motion P0 -> P1 (FDI -> (4, 4)), with its clearance;
+    ipr_mm: (a, b) -> the reduction planned at that contact (mm), when the bodies are reduced."""
     out = []
     for a, b in bodies.near_pairs(P0, P1, REACH_MM):
-        motion = bodies.motion(a, b, P0, P1, shifted)
+        motion = bodies.motion(a, b, P0, P1)
         c = min_clearance(motion, TOLERANCE_MM, reach_mm=REACH_MM)
         if c.lower_bound_mm <= REACH_MM:
-            s = bodies.shifts.get((a, b)) if shifted else None
-            ipr = 0.0 if s is None else float(np.linalg.norm(s[0] - s[1]))
+            ipr = (ipr_mm or {}).get((a, b), 0.0)
             out.append(PairClearance(a, b, c.min_mm, c.lower_bound_mm, c.time, motion.mu > 0.0, ipr))
     return tuple(out)
 
 
+def staged_bodies(dentition, teeth, ipr, target: dict) -> tuple[ToothBodies, ToothBodies]:
+    """(the whole teeth, the teeth reduced by the IPR contacts) as exact bodies (the same object when
+    there is no IPR): stage 0's teeth and every later stage's."""
+    meshes = {n: dentition.teeth[n].mesh for n in teeth}
+    whole = ToothBodies(meshes)
+    return whole, (ToothBodies(reduced_meshes(meshes, ipr, target)) if ipr else whole)
+
+
+def certify_stages(dentition, teeth, start: dict, stage_poses, limits: StageLimits, ipr, target: dict,
+                   bodies: tuple[ToothBodies, ToothBodies] | None = None) -> Certificate:
+    """The certificate of a staging given by its poses: `teeth` (FDI) of `dentition`, `start` (FDI ->
+    (4, 4): the frames increments are measured in), stage_poses[k] (FDI -> (4, 4)) for k = 0..N,
+    the `InterproximalReduction`s done before stage 1 and the `target` poses their cuts are set at;
+    bodies: `staged_bodies` of the same, when the caller has them."""
+    whole, reduced = bodies or staged_bodies(dentition, teeth, ipr, target)
+    amounts = {(min(r.a, r.b), max(r.a, r.b)): float(r.amount_mm) for r in ipr}
+    poses = list(stage_poses)
+    first = clearances(whole, poses[0], poses[0])
+    transitions = []
+    for k in range(1, len(poses)):
+        inc = np.stack([movement_components(dentition.teeth[n], start[n], poses[k - 1][n], poses[k][n]) for n in teeth])
+        transitions.append(Transition(k, tuple(teeth), inc, clearances(reduced, poses[k - 1], poses[k], amounts),
+                                      tuple(ipr) if k == 1 else ()))
+    return Certificate(limits, first, tuple(transitions))
+
+
 def certify(plan, dentition) -> Certificate:
     """The certificate of a `StagingPlan` of `dentition`'s teeth."""
-    meshes = {n: dentition.teeth[n].mesh for n in plan.teeth}
-    bodies = ToothBodies(meshes, {(r.a, r.b): r.shifts() for r in plan.ipr})
-    poses = [plan.poses(k) for k in range(plan.n_stages + 1)]
-    start = clearances(bodies, poses[0], poses[0], shifted=False)
-    transitions = []
-    for k in range(1, plan.n_stages + 1):
-        inc = np.stack([movement_components(dentition.teeth[n], plan.start[n], poses[k - 1][n], poses[k][n])
-                        for n in plan.teeth])
-        transitions.append(Transition(k, tuple(plan.teeth), inc, clearances(bodies, poses[k - 1], poses[k]),
-                                      tuple(plan.ipr) if k == 1 else ()))
-    return Certificate(plan.limits, start, tuple(transitions))
+    return certify_stages(dentition, plan.teeth, plan.start, [plan.poses(k) for k in range(plan.n_stages + 1)],
+                          plan.limits, plan.ipr, plan.target)
 
 
 def _pair_record(c: PairClearance) -> dict:
@@ -162,9 +185,10 @@ def certificate_record(cert: Certificate, case_file=None, case_sha256: str | Non
         "case_sha256": case_sha256,
         "limits": {n: float(v) for n, v in zip(names, lim)},
         "method": {"clearance_reach_mm": REACH_MM, "clearance_tolerance_mm": TOLERANCE_MM,
-                   "limit_slack": LIMIT_SLACK,
+                   "limit_slack": LIMIT_SLACK, "ipr": "a plane cut of half the reduction on each tooth's contact side, from stage 1 on (orthosim.staging.reduction)",
                    "motion": "origin on a straight line, rotation at constant angular velocity (orthosim.geometry.motion)",
                    "clearance": "FCL exact mesh distance, branch and bound on the relative speed bound"},
+        "tolerances": dict(TOLERANCES),
         "summary": summary(cert),
         "start": {"clearances": [_pair_record(c) for c in cert.start]},
         "transitions": transitions,

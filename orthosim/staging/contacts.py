@@ -13,9 +13,9 @@ meet is tested, crowns and roots, same arch and opposing arch, through the colli
 A pair is in contact when FCL finds the meshes intersecting at some time of the stage; a contact
 shallower than `tolerance_mm` could slip between two strides, which is the check's resolution.
 
-Pairs with interproximal reduction are asked about with their two teeth moved apart along the
-contact direction by the reduction (see `orthosim.staging.ipr`): each such pair in a query of its
-own, its two teeth's poses offset before asking.
+Where interproximal reduction is planned, the checker is given the reduced teeth
+(`reduced_model`: each cut tooth's mesh replaced by its cut one, `staging.reduction`, its sphere
+tree kept: the full tooth's tree still bounds the cut tooth, so the broad phase stays conservative).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from orthosim.collision.model import CollisionModel
 from orthosim.collision.queries import ExactQueries
 
 TOLERANCE_MM = 0.002  # resolution of the exact check (see the module docstring)
-BROAD_PHASE_MARGIN_MM = 0.01  # added to every swept sphere, above the IPR offsets
+BROAD_PHASE_MARGIN_MM = 0.01  # added to every swept sphere
 
 
 @dataclass(frozen=True)
@@ -45,21 +45,13 @@ class Contact:
 
 
 class StageChecker:
-    """Contact checks of stage motions over one collision model (the teeth that take part).
+    """Contact checks of stage motions over one collision model (the teeth that take part, reduced
+    where IPR is planned: `reduced_model`)."""
 
-    shifts: (FDI a, FDI b) -> ((3,) mm, (3,) mm) arch-frame offsets added to a's and b's positions
-    when that pair (and only that pair) is tested: how interproximal reduction is modelled.
-    """
-
-    def __init__(self, model: CollisionModel, shifts: Mapping[tuple[int, int], tuple[np.ndarray, np.ndarray]] | None = None,
-                 tolerance_mm: float = TOLERANCE_MM):
+    def __init__(self, model: CollisionModel, tolerance_mm: float = TOLERANCE_MM):
         self.model = model
         self.request = CollisionRequest(all_leaf_pairs=False, refine_time_of_contact=True, contact=INTERSECTING,
                                         contact_tolerance_mm=tolerance_mm, drawn_leaves=False)
-        self.shifts = {}
-        for (a, b), (sa, sb) in (shifts or {}).items():
-            self.shifts[(a, b)] = (np.asarray(sa, float), np.asarray(sb, float))
-            self.shifts[(b, a)] = (np.asarray(sb, float), np.asarray(sa, float))
         self.queries = ExactQueries(model, memo_size=8192)
 
     @property
@@ -74,14 +66,8 @@ class StageChecker:
         intersecting there)."""
         if pairs is None:
             P0, P1 = self.model.pose_array(poses0), self.model.pose_array(poses1)
-            shift = max((float(np.linalg.norm(s[0])) for s in self.shifts.values()), default=0.0)
-            pairs = swept_sphere_pairs(self.model, P0, P1, shift + BROAD_PHASE_MARGIN_MM,
-                                       moving_only=not np.array_equal(P0, P1))
-        plain = [p for p in pairs if p not in self.shifts]
-        found = self._ask(poses0, poses1, plain) if plain else []
-        for a, b in (p for p in pairs if p in self.shifts):
-            sa, sb = self.shifts[(a, b)]
-            found += self._ask(_offset(poses0, a, sa, b, sb), _offset(poses1, a, sa, b, sb), [(a, b)])
+            pairs = swept_sphere_pairs(self.model, P0, P1, BROAD_PHASE_MARGIN_MM, moving_only=not np.array_equal(P0, P1))
+        found = self._ask(poses0, poses1, list(pairs)) if len(pairs) else []
         return sorted(found, key=lambda c: (c.time, c.a, c.b))
 
     def _ask(self, poses0, poses1, pairs) -> list[Contact]:
@@ -90,11 +76,10 @@ class StageChecker:
                 for (a, b), t in zip(res.pairs.tolist(), res.time_of_first_contact.tolist()) if not np.isnan(t)]
 
 
-def _offset(poses: Mapping[int, np.ndarray], a: int, shift_a: np.ndarray, b: int, shift_b: np.ndarray) -> dict:
-    """The poses with teeth a and b translated by their offsets (arch frame, mm)."""
-    out = dict(poses)
-    for n, s in ((a, shift_a), (b, shift_b)):
-        T = np.array(poses[n], float)
-        T[:3, 3] += s
-        out[n] = T
-    return out
+def reduced_model(model: CollisionModel, meshes: Mapping[int, object]) -> CollisionModel:
+    """`model` with each body's mesh replaced by meshes[its FDI] (tooth frame, mm) where that is
+    another mesh (a reduced tooth), its sphere tree and rest pose kept."""
+    from dataclasses import replace
+
+    bodies = [b if meshes.get(b.key, b.mesh) is b.mesh else replace(b, mesh=meshes[b.key]) for b in model.bodies]
+    return model if all(x is y for x, y in zip(bodies, model.bodies)) else CollisionModel(bodies)

@@ -1,28 +1,25 @@
 """Interproximal reduction (IPR): enamel removed between two neighbours that do not fit at the target.
 
-How much: the exact penetration of the two target meshes along their contact direction (the unit
-vector from one crown centre to the other at the target): the least distance one tooth must be
-moved away from the other along it for FCL to find the meshes apart, found by bisection to
-`RESOLUTION_MM`.
-
-How it is modelled (honestly, a simplification): the reduction is taken as done before the first
-stage, as a slab of that thickness removed at the contact, half from each tooth. The meshes are
-not cut. Instead, whenever that pair (and only that pair) is checked for contact, its two teeth
-are moved apart by half the reduction each along the contact direction, plus `CLEARANCE_MM`
-between them; every other pair sees the full teeth. This is exact for the two contacting
-surfaces when the contact direction is the direction of approach, and ignores that real
-stripping reshapes the surface (it removes enamel only near the contact, and the staged teeth
-may meet at a slightly different point of it).
+How much, and how it is modelled: as labs strip, a plane cut on each tooth's contact side
+(`staging.reduction`: the enamel beyond a plane perpendicular to the contact direction, the unit
+vector from one crown centre to the other at the target, half the reduction deep on each tooth).
+The reduction is the least such pair of equal cuts after which FCL finds the two target meshes
+apart, found by bisection to `RESOLUTION_MM`, plus `CLEARANCE_MM` of room between the cut faces,
+rounded up to 1e-4 mm (the figure stages.json and certificate.json record, so every reader cuts
+the same teeth). It is done before stage 1: from there on the planner, the certificate, the
+verifier and the exported stage models all see the reduced teeth, for every pair they check.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from orthosim.collision.queries import ExactQueries
 from orthosim.errors import OrthosimError
+from orthosim.staging.reduction import contact_cuts, cut_tooth
 
 RESOLUTION_MM = 1e-3  # bisection resolution of the reduction
 CLEARANCE_MM = 0.01  # extra room left between the reduced surfaces, above the contact check's resolution
@@ -41,49 +38,30 @@ class InterproximalReduction:
     amount_mm: float  # enamel to remove at the contact, both surfaces together
     direction: np.ndarray  # (3,) unit, arch frame: from a's crown centre to b's at the target
 
-    def shifts(self) -> tuple[np.ndarray, np.ndarray]:
-        """(3,) mm arch-frame offsets of a and of b for this pair's contact checks."""
-        h = 0.5 * (self.amount_mm + CLEARANCE_MM)
-        return -h * self.direction, h * self.direction
 
+def reduction_for(dentition, a: int, b: int, pose_a: np.ndarray, pose_b: np.ndarray, source=None) -> InterproximalReduction:
+    """The IPR that lets neighbours a and b (FDI) stand at the given target poses ((4, 4), mm):
+    the least equal pair of cuts (`reduction.contact_cuts`) that leaves the meshes apart."""
+    ta, tb = dentition.teeth[a], dentition.teeth[b]
+    ca, cb = ta.to_world(ta.crown_center, pose_a), tb.to_world(tb.crown_center, pose_b)
+    u = (cb - ca) / np.linalg.norm(cb - ca)
 
-def penetration_along(queries: ExactQueries, i: int, pose_a: np.ndarray, j: int, pose_b: np.ndarray,
-                      direction: np.ndarray) -> float:
-    """mm: least translation of body j (at pose_b) along `direction` (unit, arch frame) after which
-    the meshes of bodies i and j of `queries` no longer intersect (0 when they do not), by
-    bisection to RESOLUTION_MM."""
-    def apart(d: float) -> bool:
-        T = np.array(pose_b, float)
-        T[:3, 3] += d * direction
-        return not queries.body_intersects(i, pose_a, j, T)
+    def apart(half_mm: float) -> bool:
+        cut_a, cut_b = contact_cuts(a, b, 2.0 * half_mm, u, pose_a, pose_b)
+        q = ExactQueries.of_meshes({a: cut_tooth(ta.mesh, [cut_a]), b: cut_tooth(tb.mesh, [cut_b])}, patch_reach_mm=0.0)
+        return not q.body_intersects(q.model.index[a], pose_a, q.model.index[b], pose_b)
 
     if apart(0.0):
-        return 0.0
+        return InterproximalReduction(a, b, 0.0, u)
     lo, hi = 0.0, 0.05
     while not apart(hi):
-        lo, hi = hi, 2 * hi
-        if hi > 2 * MAX_IPR_MM:
-            return float("inf")
-    while hi - lo > RESOLUTION_MM:
+        if 2.0 * hi > MAX_IPR_MM:
+            raise StagingError(source, f"target of teeth {a} and {b}",
+                               f"the two teeth overlap by more than {MAX_IPR_MM:g} mm at the target: no reduction can make room",
+                               "check the target movements of these teeth (units, signs)")
+        lo, hi = hi, 2.0 * hi
+    while hi - lo > 0.5 * RESOLUTION_MM:
         mid = 0.5 * (lo + hi)
-        if apart(mid):
-            hi = mid
-        else:
-            lo = mid
-    return hi
-
-
-def reduction_for(model, dentition, a: int, b: int, pose_a: np.ndarray, pose_b: np.ndarray, source=None,
-                  queries: ExactQueries | None = None) -> InterproximalReduction:
-    """The IPR that lets neighbours a and b (FDI) stand at the given target poses (queries: the
-    caller's `ExactQueries` of `model`; one is made when None)."""
-    ca = dentition.teeth[a].to_world(dentition.teeth[a].crown_center, pose_a)
-    cb = dentition.teeth[b].to_world(dentition.teeth[b].crown_center, pose_b)
-    u = (cb - ca) / np.linalg.norm(cb - ca)
-    queries = queries or ExactQueries(model)
-    amount = penetration_along(queries, model.index[a], pose_a, model.index[b], pose_b, u)
-    if amount > MAX_IPR_MM:
-        raise StagingError(source, f"target of teeth {a} and {b}",
-                           f"the two teeth overlap by more than {MAX_IPR_MM:g} mm at the target: no reduction can make room",
-                           "check the target movements of these teeth (units, signs)")
-    return InterproximalReduction(a, b, float(amount), u)
+        lo, hi = (lo, mid) if apart(mid) else (mid, hi)
+    amount = math.ceil((2.0 * hi + CLEARANCE_MM) * 1e4) / 1e4
+    return InterproximalReduction(a, b, amount, u)

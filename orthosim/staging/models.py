@@ -1,6 +1,7 @@
 """Stage models for the lab: every stage's posed teeth, one file per arch, to print aligners on.
 
-    export_stage_models(dentition, [plan.poses(k) for k in range(plan.n_stages + 1)], "models", "stl")
+    export_stage_models(dentition, [plan.poses(k) for k in range(plan.n_stages + 1)], "models", "stl",
+                        reduced=reduced_meshes(meshes, plan.ipr, plan.target))
 
 For stage k (0 = the start) and each arch with staged teeth: `stage_NN_upper.<fmt>` and
 `stage_NN_lower.<fmt>` (NN zero-padded to two digits, more when there are 100 stages or more).
@@ -17,9 +18,11 @@ collapse are dropped (the parametric molars have a zero-height sliver at a root 
 2e-11 mm apart: STL's float32 coordinates would weld them on reading and leave the molar open).
 The tooth stays closed and its volume unchanged.
 
-What is not there: gingiva (no case of orthosim has a gingiva model yet) and the reduction itself:
-where interproximal reduction is planned, the exported teeth are the full teeth, so from stage 1 on
-the two reduced teeth overlap by up to the planned amount at that contact (see `staging.ipr`).
+Where interproximal reduction is planned, stage 0 holds the teeth as they are and every later stage
+the reduced teeth (`reduced`: the planned enamel cut off each contact side, `staging.reduction`),
+the teeth the certificate's clearances are measured on. `stage_tooth_meshes` gives the meshes of a
+stage, for any other writer of stage models. What is not there: gingiva (no case of orthosim has a
+gingiva model yet).
 """
 
 from __future__ import annotations
@@ -61,29 +64,45 @@ def arch_teeth(teeth: Sequence[int]) -> dict[str, list[int]]:
     return out
 
 
-def arch_mesh(dentition, teeth: Sequence[int], poses: Mapping[int, np.ndarray]):
-    """One trimesh of the teeth posed in the arch frame (mm), each tooth a separate closed body."""
+def stage_tooth_meshes(dentition, teeth: Sequence[int], stage: int, reduced: Mapping[int, object] | None = None) -> dict:
+    """FDI -> the tooth-frame mesh (mm) a stage holds: the whole tooth at stage 0, the reduced one
+    (reduced[FDI], where given) from stage 1 on, when the reduction has been done."""
+    return {n: (reduced or {}).get(n, dentition.teeth[n].mesh) if stage >= 1 else dentition.teeth[n].mesh for n in teeth}
+
+
+def arch_mesh(dentition, teeth: Sequence[int], poses: Mapping[int, np.ndarray], meshes: Mapping[int, object] | None = None):
+    """One trimesh of the teeth posed in the arch frame (mm), each tooth a separate closed body;
+    meshes: FDI -> tooth-frame mesh to pose (default: the dentition's)."""
     import trimesh
 
-    return trimesh.util.concatenate([printable(dentition.teeth[n].world_mesh(poses[n])) for n in teeth])
+    local = meshes or {n: dentition.teeth[n].mesh for n in teeth}
+
+    def posed(n):
+        m = local[n].copy()
+        m.apply_transform(np.asarray(poses[n], float))
+        return m
+
+    return trimesh.util.concatenate([printable(posed(n)) for n in teeth])
 
 
-def _arch_bytes(dentition, teeth, poses, fmt: str) -> bytes:
+def _arch_bytes(dentition, teeth, poses, fmt: str, meshes: Mapping[int, object]) -> bytes:
     if fmt == "glb":
         import trimesh
 
         scene = trimesh.Scene()
         for n in teeth:
-            scene.add_geometry(printable(dentition.teeth[n].mesh), node_name=f"tooth_{n}", geom_name=f"tooth_{n}",
+            scene.add_geometry(printable(meshes[n]), node_name=f"tooth_{n}", geom_name=f"tooth_{n}",
                                transform=np.asarray(poses[n], float))
         return scene.export(file_type="glb")
-    return arch_mesh(dentition, teeth, poses).export(file_type=fmt)
+    return arch_mesh(dentition, teeth, poses, meshes).export(file_type=fmt)
 
 
 def export_stage_models(dentition, stage_poses: Sequence[Mapping[int, np.ndarray]], out_dir: str | Path,
-                        fmt: str = "stl", teeth: Sequence[int] | None = None) -> list[Path]:
+                        fmt: str = "stl", teeth: Sequence[int] | None = None,
+                        reduced: Mapping[int, object] | None = None) -> list[Path]:
     """Write every stage's arches (stage_poses[k]: FDI -> (4, 4) pose at stage k, mm) into out_dir;
-    teeth: the staged teeth (default: those posed at stage 0). Returns the files written."""
+    teeth: the staged teeth (default: those posed at stage 0); reduced: FDI -> the tooth-frame mesh
+    of each tooth reduced by IPR, held from stage 1 on. Returns the files written."""
     if fmt not in FORMATS:
         raise ValueError(f"unknown stage model format {fmt!r}")
     out_dir = Path(out_dir)
@@ -93,6 +112,7 @@ def export_stage_models(dentition, stage_poses: Sequence[Mapping[int, np.ndarray
     for k, poses in enumerate(stage_poses):
         for arch, members in arches.items():
             path = out_dir / stage_file_name(k, arch, n_stages, fmt)
-            write_bytes(path, _arch_bytes(dentition, members, poses, fmt))
+            meshes = stage_tooth_meshes(dentition, members, k, reduced)
+            write_bytes(path, _arch_bytes(dentition, members, poses, fmt, meshes))
             written.append(path)
     return written

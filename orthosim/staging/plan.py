@@ -15,7 +15,8 @@ that stage (delaying it; its movement is then split over later stages): the one 
 frees the pair, and of two such the one moving toward the other (so molars distalise before the
 premolars that follow them, and a tooth leaves a place before another moves into it). The stage is
 checked again until it is free. Teeth that no order can bring to the target without contact are
-reported; teeth that do not fit at the target get interproximal reduction first (`staging.ipr`).
+reported; teeth that do not fit at the target get interproximal reduction first (`staging.ipr`),
+cut from their meshes before stage 1 (`staging.reduction`), so every stage is checked reduced.
 """
 
 from __future__ import annotations
@@ -30,9 +31,10 @@ from orthosim.collision.broadphase import arch_neighbour_pairs
 from orthosim.collision.model import CollisionModel
 from orthosim.geometry.motion import interpolate_pose
 from orthosim.model.dentition import Dentition
-from orthosim.staging.contacts import StageChecker
+from orthosim.staging.contacts import StageChecker, reduced_model
 from orthosim.staging.ipr import InterproximalReduction, StagingError, reduction_for
 from orthosim.staging.limits import StageLimits
+from orthosim.staging.reduction import reduced_meshes
 from orthosim.exchange.target import movement_components
 
 _EPS = 1e-9
@@ -121,8 +123,8 @@ def plan_staging(dentition: Dentition, start: dict[int, np.ndarray], target: dic
                            f"intersect before any movement ({len(at_start)} intersecting pair(s))",
                            "stage from a contact-free start (separate the teeth or fix the model)")
     ipr = _reductions(dentition, model, checker, targets, teeth, source)
-    if ipr:
-        checker = StageChecker(model, {(r.a, r.b): r.shifts() for r in ipr})
+    if ipr:  # done before stage 1: every stage's motion is checked on the reduced teeth
+        checker = StageChecker(reduced_model(model, reduced_meshes({b.key: b.mesh for b in model.bodies}, ipr, targets)))
     moving = np.array([np.any(np.abs(targets[n] - starts[n]) > 0) for n in teeth])
     order = {n: i for i, n in enumerate(teeth)}
     after: dict[int, set[int]] = {}  # tooth index -> teeth that must finish before it moves
@@ -214,7 +216,7 @@ def _reductions(dentition, model, checker, targets, teeth, source) -> list[Inter
             where = "of opposing arches" if F.arch_of(c.a) is not F.arch_of(c.b) else "that are not neighbours"
             raise StagingError(source, f"target of teeth {c.a} and {c.b}", f"the teeth intersect at the target ({where})",
                                "change the target so these teeth do not meet there")
-        out.append(reduction_for(model, dentition, c.a, c.b, targets[c.a], targets[c.b], source, checker.queries))
+        out.append(reduction_for(dentition, c.a, c.b, targets[c.a], targets[c.b], source))
     return out
 
 

@@ -152,21 +152,17 @@ def closest_approach(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray, b1: np.ndar
     return float(np.linalg.norm(d0 + t * v))
 
 
-Shifts = dict  # (FDI a, FDI b) -> ((3,) mm, (3,) mm): offsets of a and b when that pair is tested (IPR)
 MEMO_SIZE = 1 << 16  # exact answers remembered: every stage end of a staging (see PairMotion)
 
 
 class ToothBodies:
     """The staged teeth as exact bodies: their meshes' `ExactQueries` (no sphere trees: this is
     the certificate's and the independent verifier's view, built from meshes alone) and each
-    tooth's bounding sphere, for any pair's motion over any stage.
-
-    shifts: (FDI a, FDI b) -> ((3,) mm, (3,) mm) arch-frame offsets added to a's and b's positions
-    whenever that pair (and only that pair) is measured: how interproximal reduction is modelled
-    (`orthosim.staging.ipr`). Given once per pair in either order.
+    tooth's bounding sphere, for any pair's motion over any stage. Where interproximal reduction
+    is planned, the meshes given are the reduced teeth (`staging.reduction`).
     """
 
-    def __init__(self, meshes: dict, shifts: Shifts | None = None):
+    def __init__(self, meshes: dict):
         # whole meshes, no patches: samples across a stage move a pair too far for patches to last
         self.queries = ExactQueries.of_meshes(meshes, memo_size=MEMO_SIZE, patch_reach_mm=0.0)
         self.index = self.queries.model.index  # FDI -> body index of the queries
@@ -174,27 +170,17 @@ class ToothBodies:
         self.centre = {n: np.asarray(m.bounds, float).mean(axis=0) for n, m in meshes.items()}
         self.radius = {n: float(np.linalg.norm(np.asarray(m.vertices, float) - self.centre[n], axis=1).max())
                        for n, m in meshes.items()}
-        self.shifts: Shifts = {}
-        for (a, b), (sa, sb) in (shifts or {}).items():
-            self.shifts[(a, b)] = (np.asarray(sa, float), np.asarray(sb, float))
-            self.shifts[(b, a)] = (np.asarray(sb, float), np.asarray(sa, float))
 
-    def motion(self, a: int, b: int, P0: dict, P1: dict, shifted: bool = True) -> PairMotion:
-        """Teeth a and b moving from poses P0 to P1 (FDI -> (4, 4)), shifted by their IPR if any."""
+    def motion(self, a: int, b: int, P0: dict, P1: dict) -> PairMotion:
+        """Teeth a and b moving from poses P0 to P1 (FDI -> (4, 4))."""
         Ta0, Ta1, Tb0, Tb1 = (np.array(T, float) for T in (P0[a], P1[a], P0[b], P1[b]))
-        s = self.shifts.get((a, b)) if shifted else None
-        if s is not None:
-            for T in (Ta0, Ta1):
-                T[:3, 3] += s[0]
-            for T in (Tb0, Tb1):
-                T[:3, 3] += s[1]
         return PairMotion(self.queries, self.index[a], Ta0, Ta1, self.index[b], Tb0, Tb1)
 
     def near_pairs(self, P0: dict, P1: dict, reach_mm: float) -> list[tuple[int, int]]:
         """(a, b) with a < b of every pair that may come within reach_mm of each other during the
         motion P0 -> P1 (FDI -> (4, 4)). Each tooth's bounding-sphere centre strays from its chord
         by at most `chord_deviation_bound` (`geometry.motion`), so a pair whose chords never come
-        within the two radii, both deviations, reach_mm and its IPR shift of each other cannot."""
+        within the two radii, both deviations and reach_mm of each other cannot."""
         teeth = sorted(self.index)
         ends, slack = {}, {}
         for n in teeth:
@@ -205,8 +191,6 @@ class ToothBodies:
         out = []
         for i, a in enumerate(teeth):
             for b in teeth[i + 1:]:
-                s = self.shifts.get((a, b))
-                shift = 0.0 if s is None else float(np.linalg.norm(s[0]) + np.linalg.norm(s[1]))
-                if closest_approach(*ends[a], *ends[b]) <= slack[a] + slack[b] + reach_mm + shift:
+                if closest_approach(*ends[a], *ends[b]) <= slack[a] + slack[b] + reach_mm:
                     out.append((a, b))
         return out

@@ -16,13 +16,19 @@ collision model. What is checked, in stage order (the first failure is the one n
      limit and 3 % of the 0.15 mm extrusion limit: a stage within the limits moves a vertex by
      up to about 1 mm (2 degrees at a 13 mm root tip plus 0.25 mm), so a moving pair is
      sampled at a few hundred times, skipping only times that an FCL distance already proves free.
-     A pair with interproximal reduction is tested reduced as the planner modelled it
-     (`staging.ipr`: moved apart along the recorded direction by half the reduction each);
+     From stage 1 on the teeth are the reduced ones where IPR is planned (`staging.reduction`: the
+     recorded reduction cut off each contact side), the teeth the certificate and the models hold;
   5. the last stage is the case's target (every pose within `TARGET_ATOL_MM`);
-  6. each recorded interproximal reduction is earned: the two teeth are arch neighbours, the
-     direction is the one between their crown centres at the target, and the amount is no more
-     than their exact overlap along it at the target (`ipr.penetration_along`, + its resolution):
-     an inflated reduction would move the pair apart in step 4 and hide a real contact.
+  6. each recorded interproximal reduction is the one the case needs: the two teeth are arch
+     neighbours, the direction is the one between their crown centres at the target, and the
+     amount is the planner's own (`ipr.reduction_for` at the target), within the certificate's
+     IPR tolerance: an inflated reduction would cut a real contact away;
+  7. certificate.json: every figure it claims (per transition and pair the least clearance, its
+     lower bound and time; per tooth the increments and the largest use of a limit; the IPR per
+     contact; the summary; the case's SHA-256) equals its recomputation from the stages within the
+     tolerances it states (`staging.certcheck`); a missing or wrongly typed field is refused (exit 2);
+  8. the stage models, when models/ is there: each file holds the teeth of its stage as stages.json
+     poses them, reduced from stage 1 on (`staging.modelcheck`).
 A damaged or inconsistent folder raises StagingFolderError (exit 2); violations are returned.
 """
 
@@ -34,8 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orthosim.staging.certificate import LIMIT_SLACK
-from orthosim.staging.ipr import CLEARANCE_MM
+from orthosim.staging.certificate import LIMIT_SLACK, TOLERANCES, certificate_record, certify_stages, staged_bodies
 from orthosim.staging.limits import StageLimits
 from orthosim.staging.stagesfile import StagingFolderError, WrittenStaging, read_stages
 from orthosim.staging.sweep import ToothBodies, first_contact_on_grid
@@ -48,7 +53,7 @@ TARGET_ATOL_MM = 1e-6  # a written pose within this of the case's own (matrix en
 @dataclass(frozen=True)
 class Violation:
     stage: int  # the stage reached by the failing transition (0: the start itself)
-    kind: str  # "limit", "contact" or "target"
+    kind: str  # "limit", "contact", "target", "ipr", "certificate" or "models"
     text: str  # one line, naming the teeth and the numbers
 
 
@@ -62,6 +67,8 @@ class Verdict:
     violations: list[Violation] = field(default_factory=list)
     pairs_checked: int = 0  # pair-transitions sampled
     fcl_queries: int = 0
+    certified_figures: int = 0  # figures of certificate.json held to their recomputation
+    model_files: int = 0  # stage models checked against stages.json
     seconds: float = 0.0
 
     @property
@@ -72,7 +79,10 @@ class Verdict:
         if self.holds:
             return (f"{self.folder}: all {self.stages} stages of {self.teeth} teeth hold: within the limits "
                     f"({self.limits.text()}) and free of contact (sampled to {self.step_mm:g} mm, "
-                    f"{self.pairs_checked} pair-stages, {self.fcl_queries} FCL queries, {self.seconds:.1f} s)")
+                    f"{self.pairs_checked} pair-stages, {self.fcl_queries} FCL queries), certificate.json's "
+                    f"{self.certified_figures} figures recomputed"
+                    + (f", {self.model_files} stage models match stages.json" if self.model_files else "")
+                    + f" ({self.seconds:.1f} s)")
         v = self.violations[0]
         more = f" ({len(self.violations) - 1} more)" if len(self.violations) > 1 else ""
         return f"{self.folder}: stage {v.stage}: {v.kind}: {v.text}{more}"
@@ -109,31 +119,49 @@ def load_for_verify(folder: str | Path, case_path: str | Path | None = None):
 
 
 def verify_staging(written: WrittenStaging, dentition, start: dict, target: dict, limits: StageLimits | None = None,
-                   step_mm: float = STEP_MM, folder: Path | None = None) -> Verdict:
-    """Check a read staging against the case's teeth, start and target (see the module docstring)."""
+                   step_mm: float = STEP_MM, folder: Path | None = None, certificate: bool = True) -> Verdict:
+    """Check a read staging against the case's teeth, start and target (see the module docstring);
+    certificate: also hold certificate.json's figures to their recomputation (and the stage models
+    to stages.json, where written)."""
     began = time.perf_counter()
     limits = limits or written.limits
-    verdict = Verdict(Path(folder or written.path.parent), written.n_stages, len(written.teeth), limits, step_mm)
-    meshes = {n: dentition.teeth[n].mesh for n in written.teeth}
-    shifts = {}
-    for r in written.ipr:
-        h = 0.5 * (r.amount_mm + CLEARANCE_MM)
-        shifts[(r.a, r.b)] = (-h * r.direction, h * r.direction)
-    bodies = ToothBodies(meshes, shifts)
+    folder = Path(folder or written.path.parent)
+    verdict = Verdict(folder, written.n_stages, len(written.teeth), limits, step_mm)
+    bodies = staged_bodies(dentition, written.teeth, written.ipr, target)
     P = written.poses
-    _contacts(verdict, bodies, 0, P[0], P[0], step_mm, shifted=False)
+    _contacts(verdict, bodies[0], 0, P[0], P[0], step_mm)
     for k in range(1, written.n_stages + 1):
         _limits(verdict, dentition, start, written.teeth, k, P[k - 1], P[k], limits)
-        _contacts(verdict, bodies, k, P[k - 1], P[k], step_mm)
-    _ipr(verdict, written, dentition, target, bodies)
+        _contacts(verdict, bodies[1], k, P[k - 1], P[k], step_mm)
+    _ipr(verdict, written, dentition, target)
     last = written.n_stages
     for n in written.teeth:
         off = float(np.abs(P[last][n] - target[n]).max())
         if off > TARGET_ATOL_MM:
             verdict.violations.append(Violation(last, "target", f"tooth {n} ends off its target (pose entries differ by up to {off:.4g})"))
-    verdict.violations.sort(key=lambda v: v.stage)  # stable: in a stage, limits, contacts, target, IPR
+    if certificate:
+        _certificate(verdict, folder, written, dentition, start, target, bodies)
+        _models(verdict, folder, written, dentition, target)
+    verdict.violations.sort(key=lambda v: v.stage)  # stable: in a stage, limits, contacts, target, IPR, certificate, models
     verdict.seconds = time.perf_counter() - began
     return verdict
+
+
+def _certificate(verdict: Verdict, folder: Path, written: WrittenStaging, dentition, start, target, bodies) -> None:
+    from orthosim.staging.certcheck import compare, read_certificate
+
+    path, claimed = read_certificate(folder)
+    cert = certify_stages(dentition, written.teeth, start, written.poses, written.limits, written.ipr, target, bodies)
+    recomputed = certificate_record(cert, written.case_file, written.case_sha256)
+    disagreements, verdict.certified_figures = compare(path, claimed, recomputed)
+    verdict.violations += [Violation(d.stage, "certificate", d.text()) for d in disagreements]
+
+
+def _models(verdict: Verdict, folder: Path, written: WrittenStaging, dentition, target) -> None:
+    from orthosim.staging.modelcheck import check_stage_models
+
+    problems, verdict.model_files = check_stage_models(folder / "models", written, dentition, target)
+    verdict.violations += [Violation(stage, "models", text) for stage, text in problems]
 
 
 def _limits(verdict: Verdict, dentition, start, teeth, k: int, P0: dict, P1: dict, limits: StageLimits) -> None:
@@ -147,9 +175,9 @@ def _limits(verdict: Verdict, dentition, start, teeth, k: int, P0: dict, P1: dic
                                                 f"beyond the limit of {lim[j]:g} {unit} per stage"))
 
 
-def _contacts(verdict: Verdict, bodies: ToothBodies, k: int, P0: dict, P1: dict, step_mm: float, shifted: bool = True) -> None:
+def _contacts(verdict: Verdict, bodies: ToothBodies, k: int, P0: dict, P1: dict, step_mm: float) -> None:
     for a, b in bodies.near_pairs(P0, P1, 0.0):
-        motion = bodies.motion(a, b, P0, P1, shifted)
+        motion = bodies.motion(a, b, P0, P1)
         t = first_contact_on_grid(motion, step_mm)
         verdict.pairs_checked += 1
         verdict.fcl_queries += motion.queries
@@ -158,23 +186,20 @@ def _contacts(verdict: Verdict, bodies: ToothBodies, k: int, P0: dict, P1: dict,
             verdict.violations.append(Violation(k, "contact", f"teeth {a} and {b} intersect {when}"))
 
 
-def _ipr(verdict: Verdict, written: WrittenStaging, dentition, target: dict, bodies: ToothBodies) -> None:
+def _ipr(verdict: Verdict, written: WrittenStaging, dentition, target: dict) -> None:
     from orthosim.collision.broadphase import arch_neighbour_pairs
-    from orthosim.staging.ipr import RESOLUTION_MM, penetration_along
+    from orthosim.staging.ipr import reduction_for
 
     neighbours = {tuple(sorted(p)) for p in arch_neighbour_pairs(written.teeth)}
     for r in written.ipr:
         a, b = r.a, r.b
-        name = f"IPR of {a}/{b} ({r.amount_mm:.3f} mm)"
+        name = f"IPR of {a}/{b} ({r.amount_mm:.4f} mm)"
         if (min(a, b), max(a, b)) not in neighbours:
             verdict.violations.append(Violation(1, "ipr", f"{name}: the two teeth are not arch neighbours"))
             continue
-        ca = dentition.teeth[a].to_world(dentition.teeth[a].crown_center, target[a])
-        cb = dentition.teeth[b].to_world(dentition.teeth[b].crown_center, target[b])
-        u = (cb - ca) / np.linalg.norm(cb - ca)
-        if np.abs(u - r.direction).max() > 1e-6:
+        needed = reduction_for(dentition, a, b, target[a], target[b])
+        if np.abs(needed.direction - r.direction).max() > 1e-6:
             verdict.violations.append(Violation(1, "ipr", f"{name}: its direction is not from {a}'s crown centre to {b}'s at the target"))
-            continue
-        overlap = penetration_along(bodies.queries, bodies.index[a], target[a], bodies.index[b], target[b], u)
-        if r.amount_mm > overlap + RESOLUTION_MM:
-            verdict.violations.append(Violation(1, "ipr", f"{name}: more than the teeth overlap at the target ({overlap:.3f} mm)"))
+        elif abs(needed.amount_mm - r.amount_mm) > TOLERANCES["ipr_mm"]:
+            verdict.violations.append(Violation(1, "ipr", f"{name}: stages.json records {r.amount_mm:.4f} mm, "
+                                                f"the case needs {needed.amount_mm:.4f} mm at the target (tolerance {TOLERANCES['ipr_mm']:g})"))

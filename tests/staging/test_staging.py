@@ -51,11 +51,12 @@ def _assert_within_limits(dent, plan):
         np.testing.assert_allclose(plan.poses(plan.n_stages)[n], plan.target[n], atol=1e-9)
 
 
-def _first_sampled_contact(dent, plan, samples=24, shifts=None):
+def _first_sampled_contact(dent, plan, samples=24, meshes=None):
     """(stage, a, b, t) of the first contact FCL finds at `samples` + 1 times of each stage's
-    motion, among every pair with a moving tooth whose crowns are within 30 mm; None when none."""
-    objs = {n: meshquery.fcl_object(dent.teeth[n].mesh) for n in plan.teeth}
-    shifts = shifts or {}
+    motion, among every pair with a moving tooth whose crowns are within 30 mm; None when none.
+    meshes: FDI -> the tooth-frame mesh to use instead of the dentition's (reduced teeth)."""
+    meshes = meshes or {}
+    objs = {n: meshquery.fcl_object(meshes.get(n, dent.teeth[n].mesh)) for n in plan.teeth}
     centres = {n: dent.teeth[n].to_world(dent.teeth[n].crown_center, plan.start[n]) for n in plan.teeth}
     ts = np.linspace(0.0, 1.0, samples + 1)
     for k in range(plan.n_stages):
@@ -64,12 +65,8 @@ def _first_sampled_contact(dent, plan, samples=24, shifts=None):
         for x, y in itertools.combinations(plan.teeth, 2):
             if not ({x, y} & moving) or np.linalg.norm(centres[x] - centres[y]) > 30.0:
                 continue
-            sx, sy = shifts[(x, y)] if (x, y) in shifts else shifts.get((y, x), (np.zeros(3), np.zeros(3)))[::-1]
             px, py = interpolate_pose(a[x], b[x], ts), interpolate_pose(a[y], b[y], ts)
             for t, Tx, Ty in zip(ts, px, py):
-                Tx, Ty = Tx.copy(), Ty.copy()
-                Tx[:3, 3] += sx
-                Ty[:3, 3] += sy
                 meshquery.set_pose(objs[x], Tx)
                 meshquery.set_pose(objs[y], Ty)
                 if meshquery.collide(objs[x], objs[y])[0]:
@@ -133,20 +130,40 @@ def _overlap_along(dent, a, Ta, b, Tb, u, step=0.002):
         d += step
 
 
-def test_crowding_gets_the_ipr_of_the_exact_overlap_and_stages_with_it(dent):
+def test_crowding_gets_the_least_ipr_cut_that_frees_the_contact_and_stages_with_it(dent):
+    from orthosim.staging.ipr import CLEARANCE_MM, RESOLUTION_MM
+    from orthosim.staging.reduction import contact_cuts, cut_tooth, reduced_depth, reduced_meshes
+
     start, target = _moved(dent, {42: ToothMovement(mesial_mm=0.4), 43: ToothMovement(mesial_mm=0.4)})
     plan = plan_staging(dent, start, target)
     assert [(r.a, r.b) for r in plan.ipr] == [(41, 42)]
     r = plan.ipr[0]
-    overlap = _overlap_along(dent, 41, target[41], 42, target[42], r.direction)  # the test's own stepping
-    assert overlap > 0.2
-    assert abs(r.amount_mm - overlap) <= 0.05
+    assert _overlap_along(dent, 41, target[41], 42, target[42], r.direction) > 0.2  # the test's own stepping
+    # the two cuts leave the target teeth apart by about the clearance; cuts shallower by twice the
+    # bisection's resolution leave them intersecting: the least reduction that frees the contact
+    cuts = contact_cuts(41, 42, r.amount_mm, r.direction, target[41], target[42])
+    less = contact_cuts(41, 42, r.amount_mm - CLEARANCE_MM - 2 * RESOLUTION_MM, r.direction, target[41], target[42])
+    for (ca, cb), apart in ((cuts, True), (less, False)):
+        oa = meshquery.fcl_object(cut_tooth(dent.teeth[41].mesh, [ca]), memo=False)
+        ob = meshquery.fcl_object(cut_tooth(dent.teeth[42].mesh, [cb]), memo=False)
+        meshquery.set_pose(oa, target[41])
+        meshquery.set_pose(ob, target[42])
+        assert bool(meshquery.collide(oa, ob)[0]) is not apart
+        if apart:
+            assert meshquery.distance(oa, ob) <= CLEARANCE_MM
+    # each tooth is shorter toward the other by half the reduction, measured on the cut mesh
+    for c in cuts:
+        full = dent.teeth[c.fdi].mesh
+        assert reduced_depth(full, cut_tooth(full, [c]), c.normal) == pytest.approx(r.amount_mm / 2, abs=1e-9)
     assert plan.n_stages == plan.lower_bound == 2
     _assert_within_limits(dent, plan)
-    # with the reduction applied (the pair moved apart by it), every stage is free
-    assert _first_sampled_contact(dent, plan, shifts={(41, 42): r.shifts()}) is None
-    # without it, the last stage is not
+    # on the reduced teeth every stage is free; on the whole teeth the last stage is not
+    whole = {41: dent.teeth[41].mesh, 42: dent.teeth[42].mesh}
+    assert _first_sampled_contact(dent, plan, meshes=reduced_meshes(whole, plan.ipr, plan.target)) is None
     assert _first_sampled_contact(dent, plan) is not None
+
+    for n in plan.teeth:
+        np.testing.assert_allclose(plan.poses(plan.n_stages)[n], plan.target[n], atol=1e-9)
 
 
 def test_shipped_staging_cases_validate():
