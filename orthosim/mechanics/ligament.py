@@ -98,7 +98,7 @@ class LigamentProperties:
 DEFAULT = LigamentProperties()
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
+def skew(v: np.ndarray) -> np.ndarray:
     """(..., 3, 3) the cross-product matrices [v]x of (..., 3) vectors."""
     out = np.zeros(v.shape[:-1] + (3, 3))
     out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
@@ -175,7 +175,7 @@ def stiffness_of_faces(centers: np.ndarray, normals: np.ndarray, areas: np.ndarr
     A = ks * a.sum() * np.eye(3) + (kn - ks) * nn
     # sum over faces of [r]x K_i and [r]x K_i [r]x^T, K_i = a (ks I + (kn - ks) n n^T), without (n, 3, 3) arrays
     rn = np.cross(r, n)
-    B = ks * _skew(np.einsum("i,ij->j", a, r)) + (kn - ks) * np.einsum("i,ij,ik->jk", a, rn, n)
+    B = ks * skew(np.einsum("i,ij->j", a, r)) + (kn - ks) * np.einsum("i,ij,ik->jk", a, rn, n)
     rr = np.einsum("i,ij,ik->jk", a, r, r)
     D = ks * (np.trace(rr) * np.eye(3) - rr) + (kn - ks) * np.einsum("i,ij,ik->jk", a, rn, rn)
     K = np.empty((6, 6))
