@@ -40,7 +40,8 @@ def _run(bench: EvidenceModels, loads, extractions, steps: int, stop_pair: tuple
     arch = F.arch_of(loads[0].teeth[0])
     extractions = tuple(extractions) + tuple(t for t in dent.teeth if F.arch_of(t) != arch)
     case = spec_case(ModelSpec(resolution="coarse"), loads, extractions, steps * STEP_DAYS)
-    settings = replace(MovementSettings.from_case(case, dent), rate=bench.law)
+    settings = replace(MovementSettings.from_case(case, dent), rate=bench.law, resistance_rule=bench.resistance_rule,
+                       ligament=bench.ligament)
     model = MovementModel.build(case, dent, bench.collision(), settings)
     records = []
     for record in simulate(model, "continuous", steps):

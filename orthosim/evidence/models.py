@@ -20,11 +20,16 @@ class EvidenceModels:
 
     law: the rate law under test. real: a callable giving the real patient's dentition, or None
     when the shared data is absent (rows on real teeth are then skipped). ligament: the ligament's
-    material and crest depth (the published defaults: inputs, never tuned against a row)."""
+    material and crest depth (the published defaults: inputs, never tuned against a row).
+    resistance_rule: how the simulated rows (rates, anchorage) move teeth: "ligament" (the root's
+    compliance and its embedded surface), or a rule of `orthosim.mechanics.resistance`, as a case
+    file on `law` gets by default (`orthosim.exchange.case.default_resistance_rule`)."""
 
-    def __init__(self, law: RateLaw, real: Callable[[], Any] | None = None, ligament: LigamentProperties = DEFAULT):
+    def __init__(self, law: RateLaw, real: Callable[[], Any] | None = None, ligament: LigamentProperties = DEFAULT,
+                 resistance_rule: str = "ligament"):
         self.law = law
         self.ligament = ligament
+        self.resistance_rule = resistance_rule  # how the simulated rows move teeth, as a case on `law` would
         self._real = real
         self._cache: dict[str, Any] = {}
 
@@ -44,7 +49,8 @@ class EvidenceModels:
     def mechanics(self, model: str, fdi: int) -> ToothMechanics:
         key = f"mech:{model}:{fdi}"
         if key not in self._cache:
-            self._cache[key] = build_mechanics(self.dentition(model).teeth[fdi], law=self.law)
+            self._cache[key] = build_mechanics(self.dentition(model).teeth[fdi], self.resistance_rule, law=self.law,
+                                               ligament=self.ligament)
         return self._cache[key]
 
     def support(self, model: str, fdi: int) -> RootSupport:

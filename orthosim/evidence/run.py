@@ -26,7 +26,10 @@ def run_rows(bench: EvidenceModels, rows: tuple[EvidenceRow, ...]) -> list[RowRe
 
 def evidence_models(law: RateLaw | None = None, with_real: bool = True) -> EvidenceModels:
     """A bench for `law` (default: the "clinical" set), with the real patient when `with_real` and
-    its data is present (../shared/data, `orthosim.exchange.shareddata`)."""
+    its data is present (../shared/data, `orthosim.exchange.shareddata`); its teeth move as a
+    parametric case on that law would by default (the paper's law: the literature rule; any other:
+    the ligament)."""
+    from orthosim.exchange.case import default_resistance_rule
     from orthosim.exchange.shareddata import open_full_jaw_dir
 
     real = None
@@ -35,7 +38,9 @@ def evidence_models(law: RateLaw | None = None, with_real: bool = True) -> Evide
             from orthosim.exchange.case import CASES_DIR, load_case
 
             return load_case(CASES_DIR / "open_full_jaw_patient26.toml").build_dentition()
-    return EvidenceModels(law or PARAMETER_SETS["clinical"], real)
+    law = law or PARAMETER_SETS["clinical"]
+    name = "paper" if law == PARAMETER_SETS["paper"] else "clinical"
+    return EvidenceModels(law, real, resistance_rule=default_resistance_rule("parametric", name))
 
 
 def run_evidence(law: RateLaw | None = None, with_real: bool = True,
