@@ -158,7 +158,8 @@ def write_evidence(results: list[RowResult], folder: Path, law_name: str, law_te
                "rows": [v for v in view if v["role"] == role]} for role, title, text in _GROUPS]
     html = Environment(autoescape=True).from_string(_PAGE).render(
         rows=view, groups=groups, law_name=law_name, law_text=law_text, headline=_headline(results),
-        model_text="coarse parametric model, monthly steps; the real Open-Full-Jaw patient where a row is about real teeth")
+        model_text="coarse parametric model, monthly steps; the real Open-Full-Jaw patient where a row is about real "
+                   "teeth; centres of resistance and rotation from each tooth's periodontal ligament")
     write_text(folder / "evidence.json", json.dumps(data, indent=2) + "\n")
     write_text(folder / "index.html", html)
 
