@@ -40,7 +40,9 @@ VERDICTS = {
     "fea_upper_first_molar_cr_lingual": "inside",
     "fea_upper_first_molar_cr_lingual_real": "inside",
     "smith_burstone1984_controlled_tipping": "inside",
+    "smith_burstone1984_controlled_tipping_real": "inside",
     "smith_burstone1984_translation": "inside",
+    "smith_burstone1984_translation_real": "inside",
     "ccd2018_canine_retraction_molar_anchorage": "inside",
     "ccd2018_lower_canine_retraction_molar_anchorage": "outside",  # the lower molars stay under the threshold
     "ccd2018_canine_retraction_implant_anchorage": "inside",
