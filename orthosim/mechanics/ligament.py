@@ -46,6 +46,7 @@ stiffness, not where the tooth turns. Units throughout: mm, N, N*mm, rad, in the
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -194,13 +195,26 @@ def resistance_of(K: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     return c, vectors[:, order].T.copy(), float(np.linalg.norm(S))
 
 
+# tooth -> {(properties, crest mm): its RootSupport}: a tooth model never changes, so its ligament is
+# worked out once per process however many movement models, evidence rows or spread runs ask
+_KNOWN: "weakref.WeakKeyDictionary[Tooth, dict]" = weakref.WeakKeyDictionary()
+
+
 def root_support(tooth: Tooth, props: LigamentProperties = DEFAULT, crest_below_cej_mm: float | None = None) -> RootSupport:
-    """The ligament of `tooth` (its root mesh apical of the crest; see the module text).
+    """The ligament of `tooth` (its root mesh apical of the crest; see the module text), worked out
+    once per tooth model and properties.
 
     crest_below_cej_mm: this tooth's crest depth below the CEJ (mm) where bone was lost; by default
     the properties' healthy depth. A crest at or beyond the apex, or one that leaves no root face
     embedded, is a CaseError."""
     crest = props.crest_below_cej_mm if crest_below_cej_mm is None else float(crest_below_cej_mm)
+    known = _KNOWN.setdefault(tooth, {})
+    if (props, crest) not in known:
+        known[(props, crest)] = _root_support(tooth, props, crest)
+    return known[(props, crest)]
+
+
+def _root_support(tooth: Tooth, props: LigamentProperties, crest: float) -> RootSupport:
     if crest >= tooth.root_length:
         raise CaseError(None, f"ligament.bone_level_mm.{tooth.fdi}",
                         f"the crest {crest:g} mm below the CEJ is deeper than tooth {tooth.fdi}'s root ({tooth.root_length:.1f} mm)",
