@@ -1,9 +1,11 @@
 """`orthosim evidence`: the evidence table run on the model, written as evidence.json and one self-contained page.
 
-The page has one section per row: source and exact figure, what was measured and under which
-force system, the published mean and interval, the simulated value, inside or outside (with the
-row's one-line reason when outside), and a plot (matplotlib, embedded as a PNG data URI, so the
-page opens anywhere without its folder). The rows themselves are run by
+The page counts the validation rows (not fitted: the model meets them or not) apart from the
+calibration rows (their values fitted a constant, so they are inside by construction), lists the
+two apart, and has one section per row: its role, source and exact figure, what was measured and
+under which force system, the published mean and interval, the simulated value, inside or outside
+(with the row's one-line reason when outside), and a plot (matplotlib, embedded as a PNG data URI,
+so the page opens anywhere without its folder). The rows themselves are run by
 `orthosim.evidence`; this module only draws and writes.
 """
 
@@ -15,7 +17,7 @@ import json
 import math
 from pathlib import Path
 
-from orthosim.evidence import RowResult
+from orthosim.evidence import RowResult, counts
 from orthosim.storage.atomic import write_text
 
 _PAGE = """<!doctype html>
@@ -30,15 +32,16 @@ section .text{flex:1;font-size:.92em}section img{width:460px;height:auto}
 dt{font-weight:bold;margin-top:.4em}dd{margin-left:0}
 </style></head><body>
 <h1>Tooth movement against clinical evidence</h1>
-<p>Rate law: <b>{{ law_name }}</b> ({{ law_text }}). {{ counts }}. Each row is set up again on orthosim's
+<p><b>{{ headline }}</b>. Rate law: <b>{{ law_name }}</b> ({{ law_text }}). Each row is set up again on orthosim's
 model ({{ model_text }}) and measured the way the source measured it.</p>
-<table class="summary"><tr><th>row</th><th>topic</th><th>published</th><th>interval</th><th>simulated</th><th>verdict</th></tr>
-{% for r in rows %}<tr><td><a href="#{{ r.id }}">{{ r.id }}</a></td><td>{{ r.topic }}</td><td>{{ r.published }}</td>
+{% for group in groups %}<h2>{{ group.title }}</h2><p>{{ group.text }}</p>
+<table class="summary" id="{{ group.role }}"><tr><th>row</th><th>topic</th><th>published</th><th>interval</th><th>simulated</th><th>verdict</th></tr>
+{% for r in group.rows %}<tr><td><a href="#{{ r.id }}">{{ r.id }}</a></td><td>{{ r.topic }}</td><td>{{ r.published }}</td>
 <td>[{{ r.low }}, {{ r.high }}]</td><td>{{ r.value }}</td><td class="{{ r.status }}">{{ r.status }}</td></tr>
 {% endfor %}</table>
-{% for r in rows %}<section id="{{ r.id }}"><div class="text"><h2>{{ r.id }}</h2>
+{% endfor %}{% for r in rows %}<section id="{{ r.id }}"><div class="text"><h2>{{ r.id }}</h2>
 <p class="{{ r.status }}">{{ r.status }}{% if r.reason %}: {{ r.reason }}{% endif %}</p>
-<dl><dt>Source</dt><dd>{{ r.source }}</dd><dt>Figure</dt><dd>{{ r.figure }}</dd>
+<dl><dt>Role</dt><dd>{{ r.role }}</dd><dt>Source</dt><dd>{{ r.source }}</dd><dt>Figure</dt><dd>{{ r.figure }}</dd>
 <dt>Measured</dt><dd>{{ r.measured }}</dd><dt>Force system</dt><dd>{{ r.force_system }}</dd>
 <dt>Published</dt><dd>{{ r.published }}, interval [{{ r.low }}, {{ r.high }}] {{ r.unit }}: {{ r.interval }}</dd>
 <dt>Simulated</dt><dd>{{ r.value }} {{ r.unit }}: {{ r.note }}</dd></dl></div>
@@ -102,9 +105,6 @@ def _mark(ax, row, result: RowResult) -> None:
     elif row.kind == "mf_center":
         ax.axvspan(row.low, row.high, color="#1a7f37", alpha=0.15, label="published M/F")
         ax.axvline(result.value, color="#b42318", label=f"simulated {_fmt(result.value)} mm")
-    else:
-        ax.axvline(s.get("m_over_f_mm", 0.0), color="#b42318", label=f"M/F {s.get('m_over_f_mm', 0):g} mm")
-        ax.axhline(0.0, color="#999", ls=":")
 
 
 def _reason(result: RowResult, law_name: str) -> str:
@@ -115,18 +115,29 @@ def _reason(result: RowResult, law_name: str) -> str:
 
 
 def evidence_json(results: list[RowResult], law_name: str) -> dict:
-    """evidence.json: per row its published figure, interval, simulated value and verdict (NaN as null)."""
+    """evidence.json: per row its role (`fitted`), published figure, interval, simulated value and
+    verdict (NaN as null); the counts of validation rows (the headline) and calibration rows apart."""
     rows = []
     for r in results:
         row = r.row
-        rows.append({"id": row.id, "topic": row.topic, "source": row.source, "figure": row.figure,
+        rows.append({"id": row.id, "topic": row.topic, "fitted": row.fitted, "source": row.source, "figure": row.figure,
                      "measured": row.measured, "force_system": row.force_system, "unit": row.unit,
-                     "published_mean": row.mean if math.isfinite(row.mean) else None, "interval": [row.low, row.high], "interval_note": row.interval,
+                     "published_mean": row.mean, "interval": [row.low, row.high], "interval_note": row.interval,
                      "model": row.model, "simulated": r.value if math.isfinite(r.value) else None,
                      "status": r.status, "inside": r.inside, "reason": _reason(r, law_name), "note": r.note})
+    groups = {role: counts(results, role) for role in ("validation", "calibration")}
     return {"rate_law": law_name, "rows": rows,
+            **{role: {"rows": c.rows, "inside": c.inside, "outside": c.outside, "skipped": c.skipped}
+               for role, c in groups.items()},
             "inside": sum(r.status == "inside" for r in results), "outside": sum(r.status == "outside" for r in results),
             "skipped": sum(r.status == "skipped" for r in results)}
+
+
+_GROUPS = (
+    ("validation", "Validation", "Rows whose values fitted nothing: the model meets them, or misses them, on its own."),
+    ("calibration", "Calibration", "Rows whose values fitted the rate law's constants "
+     "(orthosim.evidence.calibration): inside by construction, shown to keep the fit honest."),
+)
 
 
 def write_evidence(results: list[RowResult], folder: Path, law_name: str, law_text: str) -> None:
@@ -137,27 +148,33 @@ def write_evidence(results: list[RowResult], folder: Path, law_name: str, law_te
     view = []
     for r in results:
         row = r.row
-        published = f"{_fmt(row.mean)} {row.unit}" if math.isfinite(row.mean) else "a class, no number"
-        view.append({"id": row.id, "topic": row.topic, "published": published, "low": _fmt(row.low), "high": _fmt(row.high),
+        view.append({"id": row.id, "topic": row.topic, "role": row.role, "published": f"{_fmt(row.mean)} {row.unit}",
+                     "low": _fmt(row.low), "high": _fmt(row.high),
                      "unit": row.unit, "value": _fmt(r.value), "status": r.status, "reason": _reason(r, law_name),
                      "source": row.source, "figure": row.figure, "measured": row.measured,
                      "force_system": row.force_system, "interval": row.interval, "note": r.note,
                      "plot": plot_row(r) if r.curve is not None else ""})
-    counts = f"{data['inside']} rows inside, {data['outside']} outside, {data['skipped']} skipped"
+    groups = [{"role": role, "title": title, "text": f"{counts(results, role).line()}. {text}",
+               "rows": [v for v in view if v["role"] == role]} for role, title, text in _GROUPS]
     html = Environment(autoescape=True).from_string(_PAGE).render(
-        rows=view, law_name=law_name, law_text=law_text, counts=counts,
-        model_text="coarse parametric model, monthly steps; the real Open-Full-Jaw patient where a row is about real teeth")
+        rows=view, groups=groups, law_name=law_name, law_text=law_text, headline=_headline(results),
+        model_text="coarse parametric model, monthly steps; the real Open-Full-Jaw patient where a row is about real "
+                   "teeth; centres of resistance and rotation from each tooth's periodontal ligament")
     write_text(folder / "evidence.json", json.dumps(data, indent=2) + "\n")
     write_text(folder / "index.html", html)
 
 
+def _headline(results: list[RowResult]) -> str:
+    """'9 of 11 validation rows inside (1 skipped); 5 of 5 calibration rows (fitted) inside'."""
+    return f"{counts(results, 'validation').line()}; {counts(results, 'calibration').line()} (fitted)"
+
+
 def outcome_lines(results: list[RowResult], law_name: str, page: Path) -> list[str]:
-    """What `orthosim evidence` prints: the count of rows inside, then one line per row outside with its reason."""
-    inside = sum(r.inside for r in results)
-    lines = [f"{inside} of {len(results)} evidence rows inside their published interval "
-             f"({sum(r.status == 'skipped' for r in results)} skipped); page: {page}"]
+    """What `orthosim evidence` prints: the validation count (the headline) and the calibration count,
+    then one line per row outside with its role and reason."""
+    lines = [f"{_headline(results)}; page: {page}"]
     for r in results:
         if r.status == "outside":
-            lines.append(f"  outside: {r.row.id}: {_fmt(r.value)} {r.row.unit} not in [{r.row.low:g}, {r.row.high:g}]: "
-                         f"{_reason(r, law_name)}")
+            lines.append(f"  outside ({r.row.role}): {r.row.id}: {_fmt(r.value)} {r.row.unit} not in "
+                         f"[{r.row.low:g}, {r.row.high:g}]: {_reason(r, law_name)}")
     return lines

@@ -74,10 +74,13 @@ def closed_form(bench: EvidenceModels, law: RateLaw, row: EvidenceRow) -> float:
 
 
 def fitted_rows(rows: tuple[EvidenceRow, ...]) -> tuple[EvidenceRow, ...]:
-    """The rows the fit uses: parametric rate, plateau and anchorage rows with a two-sided interval
-    (rows marked `outside` are left out: the law cannot meet them by design)."""
-    return tuple(r for r in rows if r.kind in FITTED_KINDS and r.model == "parametric" and not r.outside
-                 and not (r.kind == "anchorage_canine" and r.setup.get("reinforced")))
+    """The rows the fit uses: those the table marks `fitted = true` (its calibration rows); every
+    other row validates the fitted law without having been fitted to it."""
+    out = tuple(r for r in rows if r.fitted)
+    for r in out:
+        if r.kind not in FITTED_KINDS or r.model != "parametric":
+            raise ValueError(f"evidence row {r.id} is marked fitted but the fit has no closed form for a {r.kind} row on the {r.model} model")
+    return out
 
 
 def fit_clinical(bench: EvidenceModels | None = None, rows: tuple[EvidenceRow, ...] | None = None) -> Fit:

@@ -1,13 +1,10 @@
 """How each kind of evidence row is set up on orthosim's model and measured (`MEASURES`).
 
 Rates and anchorage run the simulator itself (`orthosim.movement.simulate`, continuous detector,
-monthly steps) on the coarse parametric model with the first premolar of the quadrant extracted;
-centres of resistance and rotation are found from the motion a force system gives
-(`free_motion`, Smith and Burstone's model): the centre of resistance is the height on the long
-axis where a horizontal force translates the tooth without turning it (what finite element and
-holographic studies look for), the centre of rotation is the point of the long axis that does
-not move along the force. Each function returns (value, one-line note, Curve). Units: mm, cN,
-cN*mm, days, mm per month.
+monthly steps) on the coarse parametric model with the first premolar of the quadrant extracted.
+Centres of resistance and the M/F rows are predicted by each tooth's periodontal ligament from its
+root alone (`orthosim.evidence.centres`). Each function returns (value, one-line note, Curve).
+Units: mm, cN, cN*mm, days, mm per month.
 """
 
 from __future__ import annotations
@@ -16,11 +13,11 @@ from dataclasses import replace
 
 import numpy as np
 
+from orthosim.evidence import centres
 from orthosim.evidence.models import STEP_DAYS, EvidenceModels, spec_case
 from orthosim.evidence.table import Curve, EvidenceRow
 from orthosim.model import fdi as F
-from orthosim.mechanics.biomechanics import DAYS_PER_MONTH, ToothMechanics, free_motion
-from orthosim.mechanics.resistance import CREST_BELOW_CEJ_MM
+from orthosim.mechanics.biomechanics import DAYS_PER_MONTH
 
 RATE_DAYS = 90.0  # three monthly steps: the canine moves freely (its space is 7 mm)
 MAX_CLOSING_STEPS = 24  # anchorage runs stop when the space closes, or after two years
@@ -43,7 +40,8 @@ def _run(bench: EvidenceModels, loads, extractions, steps: int, stop_pair: tuple
     arch = F.arch_of(loads[0].teeth[0])
     extractions = tuple(extractions) + tuple(t for t in dent.teeth if F.arch_of(t) != arch)
     case = spec_case(ModelSpec(resolution="coarse"), loads, extractions, steps * STEP_DAYS)
-    settings = replace(MovementSettings.from_case(case, dent), rate=bench.law)
+    settings = replace(MovementSettings.from_case(case, dent), rate=bench.law, resistance_rule=bench.resistance_rule,
+                       ligament=bench.ligament)
     model = MovementModel.build(case, dent, bench.collision(), settings)
     records = []
     for record in simulate(model, "continuous", steps):
@@ -99,126 +97,6 @@ def measure_rate_ratio(bench: EvidenceModels, row: EvidenceRow):
     note = (f"tooth {s['tooth']}: {a:.3f} mm/month at {s['force_cN']:g} cN over {b:.3f} at "
             f"{s['reference_force_cN']:g} cN (simulated)")
     return (a / b if b > 0 else float("nan")), note, _law_curve(bench, s["tooth"])
-
-
-# ---------------------------------------------------------------------------------------------
-# centres of resistance and rotation, from the motion a force system gives
-
-
-def translation_height(mech: ToothMechanics, law, lo: float, hi: float) -> float:
-    """Local y (mm) on the long axis where a labial force of 100 cN translates the tooth without
-    turning it, by bisection between `lo` and `hi` (mm): the behavioural centre of resistance."""
-    force = np.array([0.0, 0.0, 100.0])
-
-    def tip(y: float) -> float:
-        m = free_motion(mech, np.eye(4), force, np.array([0.0, y, 0.0]), np.zeros(3), law)
-        return float(m.omega[0])
-
-    a, b = tip(lo), tip(hi)
-    if a * b > 0:
-        return float("nan")
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        t = tip(mid)
-        if (t > 0) == (a > 0):
-            lo, a = mid, t
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
-
-
-def _cr_heights(bench: EvidenceModels, row: EvidenceRow):
-    dent = bench.dentition(row.model)
-    teeth = [t for t in row.setup["teeth"] if t in dent.teeth]
-    found = {}
-    for t in teeth:
-        tooth = dent.teeth[t]
-        mech = bench.mechanics(row.model, t)
-        found[t] = (tooth, mech, translation_height(mech, bench.law, float(tooth.apex[1]), float(mech.bracket[1])))
-    return found
-
-
-def measure_cr_share(bench: EvidenceModels, row: EvidenceRow):
-    found = _cr_heights(bench, row)
-    shares = {t: (-CREST_BELOW_CEJ_MM - y) / tooth.root_length for t, (tooth, _, y) in found.items()}
-    names = tuple(str(t) for t in shares)
-    curve = Curve(np.arange(len(shares), dtype=float), np.array(list(shares.values())), "tooth (FDI)",
-                  "CR below the crest (share of root)", "bars", names)
-    note = f"mean over {len(shares)} teeth, each where a labial force translates it (crest {CREST_BELOW_CEJ_MM:g} mm below the CEJ)"
-    return float(np.mean(list(shares.values()))), note, curve
-
-
-def measure_cr_below_bracket(bench: EvidenceModels, row: EvidenceRow):
-    found = _cr_heights(bench, row)
-    depth = {t: float(mech.bracket[1] - y) for t, (_, mech, y) in found.items()}
-    curve = Curve(np.arange(len(depth), dtype=float), np.array(list(depth.values())), "tooth (FDI)",
-                  "CR below the buccal surface centre (mm)", "bars", tuple(str(t) for t in depth))
-    note = f"mean over teeth {', '.join(map(str, depth))}: bracket (buccal surface, mid-crown) to the translation height"
-    return float(np.mean(list(depth.values()))), note, curve
-
-
-def _force_system(mech: ToothMechanics, law, m_over_f_mm: float):
-    """The motion under a lingual force of 100 cN at the bracket and a couple of M/F times the force
-    opposing its tipping; and the unit tipping axis."""
-    force = np.array([0.0, 0.0, -100.0])
-    tipping = np.cross(mech.bracket - mech.center_of_resistance, force)
-    axis = tipping / np.linalg.norm(tipping)
-    return free_motion(mech, np.eye(4), force, mech.bracket, -axis * m_over_f_mm * 100.0, law), force, axis
-
-
-def rotation_center(mech: ToothMechanics, law, m_over_f_mm: float) -> float:
-    """mm from the centre of resistance to the centre of rotation along the long axis, occlusal
-    positive (inf: translation), for a lingual force at the bracket with ratio M/F (mm), from the
-    simulated motion: the point of the axis that does not move along the force."""
-    m, force, _ = _force_system(mech, law, m_over_f_mm)
-    unit = force / np.linalg.norm(force)
-    along = float(np.cross(m.omega, [0.0, 1.0, 0.0]) @ unit)  # velocity along F per mm up the axis
-    v0 = float(m.velocity @ unit)
-    return float("inf") if abs(along) < 1e-15 else -v0 / along
-
-
-def _turning(mech: ToothMechanics, law, m_over_f_mm: float) -> float:
-    """rad/day the force system turns the tooth, positive in the direction the force alone tips it."""
-    m, _, axis = _force_system(mech, law, m_over_f_mm)
-    return float(m.omega @ axis)
-
-
-def _mf_curve(mech: ToothMechanics, law) -> Curve:
-    mf = np.linspace(0.0, 14.0, 141)
-    cr = np.array([rotation_center(mech, law, x) for x in mf])
-    cr[np.abs(cr) > 40.0] = np.nan  # the centre of rotation runs off to infinity at translation: a gap, not a line
-    return Curve(mf, cr, "M/F at the bracket (mm)", "centre of rotation (mm, + occlusal of the CR)",
-                 marks={"apex": -mech.cr_to_apex_mm, "bracket": mech.bracket_lever_mm})
-
-
-def measure_mf_center(bench: EvidenceModels, row: EvidenceRow):
-    s = row.setup
-    mech = bench.mechanics(row.model, s["tooth"])
-    law = bench.law
-    if s["center"] == "apex":
-        target = -mech.cr_to_apex_mm
-        g = lambda x: rotation_center(mech, law, x) - target  # noqa: E731
-        lo, hi = 0.0, max(mech.bracket_lever_mm - 0.05, 0.1)
-    else:  # translation: the turning changes sign
-        g = lambda x: _turning(mech, law, x)  # noqa: E731
-        lo, hi = 0.0, 30.0
-    a = g(lo)
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        if (g(mid) > 0) == (a > 0):
-            lo = mid
-        else:
-            hi = mid
-    what = "at the apex" if s["center"] == "apex" else "at infinity (translation)"
-    return 0.5 * (lo + hi), f"tooth {s['tooth']}: M/F putting the centre of rotation {what}", _mf_curve(mech, law)
-
-
-def measure_mf_rotation_center(bench: EvidenceModels, row: EvidenceRow):
-    s = row.setup
-    mech = bench.mechanics(row.model, s["tooth"])
-    value = rotation_center(mech, bench.law, float(s["m_over_f_mm"]))
-    note = f"tooth {s['tooth']} at M/F {s['m_over_f_mm']:g} mm: the bracket is {mech.bracket_lever_mm:.1f} mm occlusal of the CR"
-    return value, note, _mf_curve(mech, bench.law)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -283,10 +161,10 @@ def measure_anchorage_en_masse(bench: EvidenceModels, row: EvidenceRow):
 MEASURES = {
     "rate": measure_rate,
     "rate_ratio": measure_rate_ratio,
-    "cr_share": measure_cr_share,
-    "cr_below_bracket": measure_cr_below_bracket,
-    "mf_center": measure_mf_center,
-    "mf_rotation_center": measure_mf_rotation_center,
+    "cr_share": centres.measure_cr_share,
+    "cr_below_bracket": centres.measure_cr_below_bracket,
+    "cr_lingual_of_bracket": centres.measure_cr_lingual_of_bracket,
+    "mf_center": centres.measure_mf_center,
     "anchorage_canine": measure_anchorage_canine,
     "anchorage_en_masse": measure_anchorage_en_masse,
 }

@@ -60,7 +60,7 @@ def _covers(case, row: EvidenceRow) -> str:
         if anchored == reinforced:
             return ""
         return "retraction on " + ("mini-implants" if reinforced else "molar anchorage, the reaction on the posterior teeth")
-    if row.kind in ("cr_share", "cr_below_bracket"):
+    if row.kind in ("cr_share", "cr_below_bracket", "cr_lingual_of_bracket"):
         kinds = {_kind(t) for t in s["teeth"]}
         hits = [t for ld in case.loads for t in ld.teeth if _kind(t) in kinds and ld.movement in BODILY]
         return f"bodily load on {hits[0]}" if hits else ""
@@ -71,8 +71,7 @@ def _covers_mf(case, row: EvidenceRow) -> str:
     for ld in case.loads:
         if ld.force_cN > 0 and ld.moment_cNmm and ld.movement not in BODILY:
             mf = abs(ld.moment_cNmm) / ld.force_cN
-            lo, hi = (row.low, row.high) if row.kind == "mf_center" else (row.setup["m_over_f_mm"], float("inf"))
-            if lo <= mf <= hi:
+            if row.low <= mf <= row.high:
                 return f"M/F {mf:.1f} mm on {ld.teeth[0]}"
         if (row.kind == "mf_center" and row.setup["center"] == "infinity" and ld.movement in BODILY
                 and case.wire.type == "rectangular" and ld.force_cN > 0):

@@ -1,5 +1,7 @@
 """The models the evidence rows run on: the coarse parametric dentition, its collision model, the
-real patient when present, and each tooth's mechanics under the rate law being tested (built once)."""
+real patient when present, each tooth's mechanics under the rate law being tested, and each tooth's
+periodontal ligament (`orthosim.mechanics.ligament`: the stiffness of its embedded root, from which
+the centre of resistance and the centre of rotation of any force system follow), built once."""
 
 from __future__ import annotations
 
@@ -7,20 +9,27 @@ from pathlib import Path
 from typing import Any, Callable
 
 from orthosim.mechanics.biomechanics import RateLaw, ToothMechanics, build_mechanics
+from orthosim.mechanics.ligament import DEFAULT, LigamentProperties, RootSupport, root_support
 
 EVIDENCE_RESOLUTION = "coarse"  # parametric mesh of the runs: rates do not depend on it, runs take seconds
 STEP_DAYS = 30.0
-
 
 
 class EvidenceModels:
     """The dentitions, collision model and mechanics the rows share (built once per run).
 
     law: the rate law under test. real: a callable giving the real patient's dentition, or None
-    when the shared data is absent (rows on real teeth are then skipped)."""
+    when the shared data is absent (rows on real teeth are then skipped). ligament: the ligament's
+    material and crest depth (the published defaults: inputs, never tuned against a row).
+    resistance_rule: how the simulated rows (rates, anchorage) move teeth: "ligament" (the root's
+    compliance and its embedded surface), or a rule of `orthosim.mechanics.resistance`, as a case
+    file on `law` gets by default (`orthosim.exchange.case.default_resistance_rule`)."""
 
-    def __init__(self, law: RateLaw, real: Callable[[], Any] | None = None):
+    def __init__(self, law: RateLaw, real: Callable[[], Any] | None = None, ligament: LigamentProperties = DEFAULT,
+                 resistance_rule: str = "ligament"):
         self.law = law
+        self.ligament = ligament
+        self.resistance_rule = resistance_rule  # how the simulated rows move teeth, as a case on `law` would
         self._real = real
         self._cache: dict[str, Any] = {}
 
@@ -40,7 +49,15 @@ class EvidenceModels:
     def mechanics(self, model: str, fdi: int) -> ToothMechanics:
         key = f"mech:{model}:{fdi}"
         if key not in self._cache:
-            self._cache[key] = build_mechanics(self.dentition(model).teeth[fdi], law=self.law)
+            self._cache[key] = build_mechanics(self.dentition(model).teeth[fdi], self.resistance_rule, law=self.law,
+                                               ligament=self.ligament)
+        return self._cache[key]
+
+    def support(self, model: str, fdi: int) -> RootSupport:
+        """The tooth's ligament: its root's stiffness, centre of resistance and motions (tooth frame, mm)."""
+        key = f"support:{model}:{fdi}"
+        if key not in self._cache:
+            self._cache[key] = root_support(self.dentition(model).teeth[fdi], self.ligament)
         return self._cache[key]
 
     def collision(self):

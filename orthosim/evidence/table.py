@@ -1,4 +1,10 @@
 """The evidence table (`orthosim/evidence/evidence.toml`) read and checked, and what a run of a row gives.
+
+A row is either calibration (`fitted = true`: its published value was used to fit a constant, so it
+is inside by construction) or validation (`fitted = false`: the model meets it, or not, without
+having seen it). Every row can fail: its published value is a number, and its interval is finite
+and no wider than that value's magnitude (or than 1 unit where the value is near zero); a source
+that gives a class and no number is no row.
 """
 
 from __future__ import annotations
@@ -23,13 +29,17 @@ KIND_KEYS: dict[str, tuple[str, ...]] = {
     "rate_ratio": ("tooth", "force_cN", "reference_force_cN"),
     "cr_share": ("teeth",),
     "cr_below_bracket": ("teeth",),
+    "cr_lingual_of_bracket": ("teeth",),
     "mf_center": ("tooth", "center"),
-    "mf_rotation_center": ("tooth", "m_over_f_mm"),
     "anchorage_canine": ("tooth", "anchor_teeth", "force_cN", "reinforced"),
     "anchorage_en_masse": ("teeth", "anchor_teeth", "force_cN"),
 }
+# set-up keys a kind may leave out (then the model's own value is used)
+OPTIONAL_KEYS: dict[str, tuple[str, ...]] = {"mf_center": ("bracket_above_cr_mm",)}
 _ROW = ("id", "topic", "source", "figure", "measured", "force_system", "unit", "mean", "low", "high", "interval",
-        "kind", "model", "outside")
+        "kind", "model", "fitted", "outside")
+NEAR_ZERO_WIDTH = 1.0  # the widest interval (in the row's unit) allowed around a published value under 1 unit
+# (so a share is given in %, not as a fraction of 1)
 
 
 @dataclass(frozen=True)
@@ -49,8 +59,14 @@ class EvidenceRow:
     interval: str
     kind: str
     model: str
+    fitted: bool  # True: a calibration row (its value fitted a constant); False: a validation row
     outside: str = ""
     setup: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def role(self) -> str:
+        """'calibration' or 'validation'."""
+        return "calibration" if self.fitted else "validation"
 
 
 @dataclass(frozen=True)
@@ -113,20 +129,37 @@ def _read_row(path: Path, i: int, raw: Any) -> EvidenceRow:
     kind = raw.get("kind")
     if kind not in KIND_KEYS:
         FieldReader(path, f"rows[{i}]", {}, ()).fail("kind", f"unknown kind {kind!r}", f"use one of: {', '.join(KIND_KEYS)}")
-    keys = KIND_KEYS[kind]
-    r = FieldReader(path, f"rows[{i}]", raw, _ROW + keys)
+    keys, optional = KIND_KEYS[kind], OPTIONAL_KEYS.get(kind, ())
+    r = FieldReader(path, f"rows[{i}]", raw, _ROW + keys + optional)
     text = {k: r.string(k) for k in ("id", "source", "figure", "measured", "force_system", "unit", "interval")}
-    low, high = (r.number(k, minimum=None) for k in ("low", "high"))
-    mean = r.number("mean", minimum=None) if "mean" in raw else math.nan  # a class, not a number, may have none
-    if not low <= high:
-        r.fail("high", f"the interval [{low:g}, {high:g}] is empty", "write low <= high")
+    mean, low, high = _interval(r, raw)
+    if not isinstance(raw.get("fitted"), bool):
+        r.fail("fitted", "missing, or not true or false",
+               "write fitted = true when the value was used to fit a constant, false when it validates the model")
     setup = {}
     for k in keys:
         if k not in raw:
             r.fail(k, "missing", f"a {kind} row needs {', '.join(keys)}")
         setup[k] = raw[k]
+    setup.update({k: raw[k] for k in optional if k in raw})
     return EvidenceRow(text["id"], r.string("topic", choices=TOPICS), text["source"], text["figure"], text["measured"],
                        text["force_system"], text["unit"], mean, low, high, text["interval"], kind,
-                       r.string("model", choices=MODELS), r.string("outside", ""), setup)
+                       r.string("model", choices=MODELS), raw["fitted"], r.string("outside", ""), setup)
 
 
+def _interval(r: FieldReader, raw: Any) -> tuple[float, float, float]:
+    """(mean, low, high) of a row, checked so that the row can fail: a published number, inside a
+    finite interval no wider than its magnitude (or than NEAR_ZERO_WIDTH near zero)."""
+    if "mean" not in raw:
+        r.fail("mean", "missing: a row needs the published number",
+               "give the source's number; a source that gives a class and no number is no row")
+    mean, low, high = (r.number(k, minimum=None) for k in ("mean", "low", "high"))
+    if not low <= high:
+        r.fail("high", f"the interval [{low:g}, {high:g}] is empty", "write low <= high")
+    if not low <= mean <= high:
+        r.fail("mean", f"{mean:g} lies outside its interval [{low:g}, {high:g}]", "write an interval around the published value")
+    widest = max(abs(mean), NEAR_ZERO_WIDTH)
+    if high - low > widest + 1e-12:
+        r.fail("high", f"the interval [{low:g}, {high:g}] is wider than {widest:g}, so the row could hardly fail",
+               f"narrow it to a full width of at most |mean| (or {NEAR_ZERO_WIDTH:g} near zero), or leave the row out")
+    return mean, low, high

@@ -22,6 +22,7 @@ from orthosim.model import fdi as F
 from orthosim.collision.detectors import DETECTORS
 from orthosim.errors import CaseError, OrthosimError
 from orthosim.exchange.casefields import FieldReader
+from orthosim.exchange.ligamentfields import Anchorage, CaseLigament, read_anchorage, read_ligament
 from orthosim.exchange.target import CaseStaging, read_case_staging
 
 
@@ -106,7 +107,10 @@ class Simulation:
 
     force_share: float = 0.5  # fraction (0..1) of a push passed on to the tooth it hits
     restitution: float = 0.5  # Newton's coefficient (0..1) of the reported impacts
-    resistance_rule: str = "literature"  # centre of resistance: "literature" or "paper"
+    # centre of resistance and motion: "ligament" (the root's stiffness, `orthosim.mechanics.ligament`),
+    # "literature" or "paper" (rules, `orthosim.mechanics.resistance`); a case file that leaves it out gets
+    # `default_resistance_rule`
+    resistance_rule: str = "literature"
     resistance_fraction: float = 0.4  # literature rule: share (1/3..1/2) of the embedded root below the crest
     # how much deeper (mm) teeth of the two arches in contact may sink while sliding; None: the
     # model's own (`orthosim.collision.interpenetration.default_occlusal_slide_mm`)
@@ -170,6 +174,8 @@ class Case:
     staging: CaseStaging | None = None  # the [start] and [target] sections (aligner staging), or None
     biomechanics: Biomechanics = Biomechanics()  # the [biomechanics] table: the rate law's constants
     occlusion: Occlusion = Occlusion()
+    ligament: CaseLigament = CaseLigament()  # the [ligament] table (`orthosim.exchange.ligamentfields`)
+    anchorage: tuple[Anchorage, ...] = ()  # the [[anchorage]] tables
 
     @property
     def steps(self) -> int:
@@ -238,7 +244,8 @@ class Case:
         return is_cached(*self._mesh_model_key())
 
 
-_TOP = ("case", "model", "treatment", "wire", "loads", "simulation", "start", "target", "biomechanics", "occlusion")
+_TOP = ("case", "model", "treatment", "wire", "loads", "simulation", "start", "target", "biomechanics", "occlusion",
+        "ligament", "anchorage")
 _CASE = ("name", "description")
 _MODEL = ("kind", "resolution", "third_molars", "diastema_mm", "folder", "files", "scale", "frame",
           "max_triangles_per_tooth", "upper", "lower")
@@ -267,7 +274,7 @@ _TREATMENT = ("extractions", "duration_days", "step_days", "detector")
 _WIRE = ("type",)
 _OCCLUSION = ("closure", "condylar_axis", "max_opening_deg")
 _SIMULATION = ("force_share", "restitution", "resistance_rule", "resistance_fraction", "occlusal_slide_mm")
-RESISTANCE_RULES = ("literature", "paper")
+RESISTANCE_RULES = ("ligament", "literature", "paper")
 _BIOMECHANICS = ("parameters", "threshold_cN", "saturation_cN", "max_rate_mm_per_month", "reference_root_area_mm2",
                  "mandibular_bone_factor")
 # (lowest, highest, unit, example) of each number of the [biomechanics] table
@@ -329,14 +336,18 @@ def read_case(path: str | Path) -> tuple[Case | None, list[OrthosimError]]:
     wire = section(lambda: Wire(table("wire", _WIRE).string("type", "rectangular", WIRES)), Wire())
     loads = tuple(section(lambda i=i, raw=raw: _read_load(path, i, raw, present, set(extractions), wire, problems))
                   for i, raw in enumerate(section(lambda: _load_tables(top), [])))
-    simulation = section(lambda: _read_simulation(table("simulation", _SIMULATION)))
-    staging = section(lambda: read_case_staging(path, data, present, set(extractions)))
     biomechanics = section(lambda: _read_biomechanics(table("biomechanics", _BIOMECHANICS)))
+    default_rule = default_resistance_rule(model.kind if model else "parametric",
+                                           biomechanics.parameters if biomechanics else "paper")
+    simulation = section(lambda: _read_simulation(table("simulation", _SIMULATION), default_rule))
+    staging = section(lambda: read_case_staging(path, data, present, set(extractions)))
     occlusion = section(lambda: _read_occlusion(table("occlusion", _OCCLUSION)))
+    ligament = section(lambda: read_ligament(path, top.get("ligament", {}), present))
+    anchorage = section(lambda: read_anchorage(path, top.get("anchorage", []), present, set(extractions)))
     if problems:
         return None, problems
     return Case(path, name, description, model, extractions, loads, wire, duration, step, detector, simulation, staging,
-                biomechanics, occlusion), []
+                biomechanics, occlusion, ligament, anchorage), []
 
 
 ALL_TEETH = frozenset(10 * q + p for q in F.QUADRANTS for p in range(1, 9))
@@ -370,6 +381,13 @@ def _read_treatment(treat: FieldReader, present: set[int]) -> tuple[tuple[int, .
     if duration / step > 100_000:
         treat.fail("step_days", f"{duration / step:.0f} steps is more than 100000", "use a longer step")
     return tuple(extractions), duration, step, treat.string("detector", "continuous", DETECTORS)
+
+
+def default_resistance_rule(model_kind: str, parameters: str) -> str:
+    """The [simulation] resistance_rule of a case that leaves it out: the paper's parametric cases (a
+    parametric model on the paper's rate law) keep the literature rule, so their figures stay the
+    paper's; every other case moves teeth by their ligament's stiffness."""
+    return "literature" if model_kind == "parametric" and parameters == "paper" else "ligament"
 
 
 def _read_biomechanics(r: FieldReader) -> Biomechanics:
@@ -414,14 +432,14 @@ def _read_occlusion(r: FieldReader) -> Occlusion:
     return Occlusion(closure, axis, widest)
 
 
-def _read_simulation(r: FieldReader) -> Simulation:
+def _read_simulation(r: FieldReader, default_rule: str = "literature") -> Simulation:
     share = r.number("force_share", 0.5)
     if share >= 1.0:
         r.fail("force_share", f"must be below 1, got {share:g}", "use a fraction such as 0.5 (a tooth keeps part of its push)")
     restitution = r.number("restitution", 0.5)
     if restitution > 1.0:
         r.fail("restitution", f"must be at most 1, got {restitution:g}", "use a value from 0 (no bounce) to 1 (elastic)")
-    rule = r.string("resistance_rule", "literature", RESISTANCE_RULES)
+    rule = r.string("resistance_rule", default_rule, RESISTANCE_RULES)
     fraction = r.number("resistance_fraction", 0.4)
     if not (1.0 / 3.0 - 1e-9 <= fraction <= 0.5 + 1e-9):
         r.fail("resistance_fraction", f"{fraction:g} is outside 1/3 to 1/2", "use a value between 0.333 and 0.5")

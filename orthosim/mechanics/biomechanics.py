@@ -55,6 +55,7 @@ from orthosim.model.fdi import Arch
 from orthosim.mechanics.ratelaw import DAYS_PER_MONTH, PARAMETER_SETS, RateLaw
 from orthosim.model.tooth import ROOT, Tooth
 from orthosim.mechanics.resistance import center_of_resistance, tipping_center
+from orthosim.mechanics.ligament import DEFAULT as DEFAULT_LIGAMENT, LigamentProperties, RootSupport, root_support
 
 # Tooth density for masses and inertias (mean of enamel, dentine and root): 2.2 g/cm^3 = 2.2e-3 g/mm^3.
 DENSITY_G_PER_MM3 = 2.2e-3
@@ -79,6 +80,7 @@ class ToothMechanics:
     center_of_mass: np.ndarray  # (3,) mm local
     inertia_g_mm2: np.ndarray  # (3, 3) g*mm^2 about the centre of mass, local axes
     bone_factor: float = 1.0  # the rate law's mandibular bone factor for a lower tooth, 1 for an upper one
+    support: RootSupport | None = None  # the ligament (rule "ligament"): the step moves the tooth by its compliance
 
     @property
     def resisting_area_mm2(self) -> float:
@@ -111,16 +113,26 @@ def bracket_point(tooth: Tooth) -> np.ndarray:
 
 
 def build_mechanics(tooth: Tooth, rule: str = "literature", fraction: float = 0.4,
-                    law: RateLaw | None = None) -> ToothMechanics:
-    """The tooth's mechanics (centre of resistance by `rule`, see `resistance`); mass at 2.2 g/cm^3;
-    a lower tooth takes `law`'s mandibular bone factor (none without a law)."""
-    cr = center_of_resistance(tooth, rule, fraction)
+                    law: RateLaw | None = None, ligament: LigamentProperties = DEFAULT_LIGAMENT,
+                    crest_below_cej_mm: float | None = None) -> ToothMechanics:
+    """The tooth's mechanics (centre of resistance by `rule`, see `resistance`; rule "ligament": from
+    the root's stiffness, `ligament`, with the tooth's crest `crest_below_cej_mm` below the CEJ, mm,
+    the ligament's healthy one by default); mass at 2.2 g/cm^3; a lower tooth takes `law`'s
+    mandibular bone factor (none without a law)."""
     bracket = bracket_point(tooth)
-    d = float(bracket[1] - cr[1])
-    h = float(cr[1] - tooth.apex[1])
-    # sigma^2 / (d - 7) = h: M/F = 7 mm puts the centre of rotation at the apex
-    sigma2 = max(d - CONTROLLED_TIPPING_MF_MM, 1.0) * max(h, 1.0)
-    area = float(tooth.mesh.area_faces[tooth.face_part == ROOT].sum()) or float(tooth.mesh.area) / 2
+    support = None
+    if rule == "ligament":
+        support = root_support(tooth, ligament, crest_below_cej_mm)
+        cr = support.center_of_resistance
+        area = support.embedded_area_mm2
+        sigma2 = _ligament_sigma2(support, bracket)
+    else:
+        cr = center_of_resistance(tooth, rule, fraction)
+        d = float(bracket[1] - cr[1])
+        h = float(cr[1] - tooth.apex[1])
+        # sigma^2 / (d - 7) = h: M/F = 7 mm puts the centre of rotation at the apex
+        sigma2 = max(d - CONTROLLED_TIPPING_MF_MM, 1.0) * max(h, 1.0)
+        area = float(tooth.mesh.area_faces[tooth.face_part == ROOT].sum()) or float(tooth.mesh.area) / 2
     mesh = tooth.mesh
     if mesh.is_volume:
         mass = float(mesh.volume) * DENSITY_G_PER_MM3
@@ -133,7 +145,17 @@ def build_mechanics(tooth: Tooth, rule: str = "literature", fraction: float = 0.
         inertia = np.diag([ext[1] ** 2 + ext[2] ** 2, ext[0] ** 2 + ext[2] ** 2, ext[0] ** 2 + ext[1] ** 2]) * mass / 12
     bone = law.mandibular_bone_factor if law is not None and tooth.arch == LOWER else 1.0
     return ToothMechanics(tooth.fdi, cr, tipping_center(tooth), bracket, np.asarray(tooth.crown_center, float),
-                          np.asarray(tooth.apex, float), area, sigma2, mass, com, inertia, bone)
+                          np.asarray(tooth.apex, float), area, sigma2, mass, com, inertia, bone, support)
+
+
+def _ligament_sigma2(support: RootSupport, bracket: np.ndarray) -> float:
+    """mm^2: Smith and Burstone's sigma^2 the ligament gives: the lever d (bracket to centre of
+    resistance along the long axis) times how far apical of the centre a lingual force at the
+    bracket turns the tooth (so that `movement_type` names the ligament's motions)."""
+    c = support.center_of_resistance
+    d = float(bracket[1] - c[1])
+    cr = support.center_of_rotation(np.array([0.0, 0.0, -1.0]), bracket)
+    return max(d * float(c[1] - cr[1]), 1e-6) if np.isfinite(cr[1]) else 1e-6
 
 
 def center_of_rotation_offset(mech: ToothMechanics, m_over_f_mm: float) -> float:

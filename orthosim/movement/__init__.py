@@ -8,7 +8,8 @@ of its phases), one module per phase: `forces` (loads at the step's start, force
 (contacts at the end and the impact response); and `directions` (the director vector and contact
 normals), `propagation` (forces passed on between touching teeth), `impact` (momentum-conserving
 impact response), `closure` (the bite closing after each step), `records` (what a step leaves:
-`StepRecord`), `report` (metrics.json, steps.jsonl and distances.csv).
+`StepRecord`), `report` (metrics.json, steps.jsonl and distances.csv), `rootspread` (each moving
+tooth's range of movement over the plausible roots where roots were estimated).
 """
 
 from orthosim.mechanics.ratelaw import RateLaw

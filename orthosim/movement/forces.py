@@ -1,5 +1,6 @@
 """Phase 1 of a step: the case's loads on each tooth at the step's start poses (`AppliedLoad`), and
-the forces touching teeth pass on (`orthosim.movement.propagation`). Arch frame; cN, cN*mm, mm.
+the forces touching teeth pass on (`orthosim.movement.propagation`); the reactions an anchor unit
+takes ([[anchorage]], `orthosim.exchange.ligamentfields`). Arch frame; cN, cN*mm, mm.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from typing import Mapping
 import numpy as np
 
 from orthosim.exchange.case import Load
+from orthosim.exchange.ligamentfields import Anchorage, same_side
 from orthosim.mechanics.vec import length
 from orthosim.movement.directions import arch_direction, contact_normal, horizontal, onward_directions
 from orthosim.movement.model import MovementModel
@@ -81,9 +83,43 @@ def forces(model: MovementModel, state: StepState, centers: Mapping[int, np.ndar
         for n in load.teeth:
             if n in model.mechanics:
                 loads.setdefault(n, []).append(applied_load(model, P, load, n, centers))
+    for anchor in getattr(model.case, "anchorage", ()):
+        if anchor.kind == "teeth":
+            _anchor_reactions(model, P, anchor, loads)
     applied = {n: sum((a.force_cN for a in v), np.zeros(3)) for n, v in loads.items()}
     normals = [(a, b, contact_normal(model, (a, b), centers)) for a, b in state.touching]
     balance = propagate(applied, normals, s.force_share,
                         lambda n, f: n in model.mechanics and s.rate.moves(f, model.mechanics[n].resisting_area_mm2),
                         onward_directions(model, P, state.touching, centers))
     return Forces(loads, balance)
+
+
+def _anchor_reactions(model: MovementModel, poses: Mapping[int, np.ndarray], anchor: Anchorage,
+                      loads: dict[int, list[AppliedLoad]]) -> None:
+    """Adds to `loads` the reactions of the loads on the anchorage's active teeth: each active tooth's
+    resultant force (cN), reversed, shared by the anchor unit's teeth of its side at their brackets
+    by their stiffness along it (the ligament's translational stiffness; the resisting root surface
+    for a tooth moved by a rule), bodily (the wire ties the unit)."""
+    for n in anchor.active:
+        own = loads.get(n)
+        if not own:
+            continue
+        reaction = -sum((a.force_cN for a in own), np.zeros(3))
+        f = length(reaction)
+        unit = [t for t in same_side(n, anchor.teeth) if t in model.mechanics]
+        if f == 0.0 or not unit:
+            continue
+        u = reaction / f
+        weights = np.array([_stiffness_along(model.mechanics[t], poses[t], u) for t in unit])
+        for t, w in zip(unit, weights / weights.sum()):
+            R, p = poses[t][:3, :3], poses[t][:3, 3]
+            loads.setdefault(t, []).append(AppliedLoad(reaction * w, R @ model.mechanics[t].bracket + p, np.zeros(3), True))
+
+
+def _stiffness_along(mech, pose: np.ndarray, u: np.ndarray) -> float:
+    """How stiffly a tooth resists a translation along the arch-frame unit vector u (N/mm with the
+    ligament; its resisting root surface, mm^2, for a tooth moved by a rule: only ratios count)."""
+    if mech.support is None:
+        return mech.resisting_area_mm2
+    ul = pose[:3, :3].T @ u
+    return float(ul @ mech.support.stiffness[:3, :3] @ ul)

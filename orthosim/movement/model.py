@@ -12,7 +12,9 @@ from typing import TYPE_CHECKING, Callable
 
 from orthosim.collision import CollisionModel, candidate_pairs
 from orthosim.exchange.case import Case
+from orthosim.errors import CaseError
 from orthosim.mechanics.biomechanics import DAYS_PER_MONTH, PARAMETER_SETS, RateLaw, ToothMechanics, build_mechanics
+from orthosim.mechanics.ligament import DEFAULT as DEFAULT_LIGAMENT, LigamentProperties
 from orthosim.collision.interpenetration import default_occlusal_slide_mm
 from orthosim.model import fdi as F
 from orthosim.model.dentition import Dentition
@@ -27,7 +29,10 @@ class MovementSettings:
 
     force_share: fraction (0..1) of a push passed on to the tooth it hits.
     restitution: Newton's coefficient (0..1) of the reported impacts.
-    resistance_rule / resistance_fraction: centre of resistance, see `resistance`.
+    resistance_rule / resistance_fraction: centre of resistance, see `resistance`; "ligament": the
+        root's stiffness gives it and the motion (`orthosim.mechanics.ligament`, `ligamentmotion`).
+    ligament: the ligament's properties; bone_level_mm: FDI -> crest depth below the CEJ (mm) of a
+        tooth that lost bone (the case's [ligament] table).
     contact_tolerance_mm: continuous detector: teeth stop within this travel (mm) of touching.
     touch_tolerance_mm: exact and continuous detectors: meshes this close (mm) count as touching.
     rounds: continuous detector: detection rounds on cut motions per step.
@@ -46,6 +51,8 @@ class MovementSettings:
     touch_tolerance_mm: float = 0.05
     rounds: int = 4
     occlusal_slide_mm: float = 0.05
+    ligament: LigamentProperties = DEFAULT_LIGAMENT
+    bone_level_mm: tuple[tuple[int, float], ...] = ()
 
     @classmethod
     def from_case(cls, case: Case, dentition: Dentition | None = None) -> "MovementSettings":
@@ -56,11 +63,13 @@ class MovementSettings:
         if slide is None:
             slide = default_occlusal_slide_mm(dentition) if dentition is not None else cls.occlusal_slide_mm
         rate = rate_law(getattr(case, "biomechanics", None))
+        lig = getattr(case, "ligament", None)
+        ligament = {} if lig is None else {"ligament": lig.properties(), "bone_level_mm": tuple(sorted(lig.bone_level_mm.items()))}
         if sim is None:
-            return cls(occlusal_slide_mm=slide, rate=rate)
+            return cls(occlusal_slide_mm=slide, rate=rate, **ligament)
         return cls(force_share=sim.force_share, restitution=sim.restitution,
                    resistance_rule=sim.resistance_rule, resistance_fraction=sim.resistance_fraction,
-                   rate=rate, occlusal_slide_mm=slide)
+                   rate=rate, occlusal_slide_mm=slide, **ligament)
 
 
 def rate_law(biomechanics) -> RateLaw:
@@ -113,11 +122,20 @@ class MovementModel:
         pairs = candidate_pairs(dentition.fdis, extracted)
         neighbours = set(dentition.adjacent_pairs(set(extracted)))
         facing = frozenset(p for p in pairs if tuple(p) not in neighbours)
-        mech = {n: build_mechanics(dentition.teeth[n], settings.resistance_rule, settings.resistance_fraction, settings.rate)
-                for n in present}
+        mech = {n: _mechanics(case, dentition, n, settings) for n in present}
         orders = {arch: [t for t in F.arch_order(arch, set(dentition.teeth)) if t not in extracted] for arch in F.Arch}
         return cls(case, dentition, collision, mech, settings, extracted, present, tuple(map(tuple, pairs)), facing,
                    arch_orders=orders, closure=_closure_model(case, dentition, settings, facing, extracted, orders))
+
+
+def _mechanics(case: Case, dentition: Dentition, fdi: int, settings: MovementSettings) -> ToothMechanics:
+    """One present tooth's mechanics by the settings' rule; a bone level that leaves the tooth no
+    embedded root is the case file's error."""
+    try:
+        return build_mechanics(dentition.teeth[fdi], settings.resistance_rule, settings.resistance_fraction, settings.rate,
+                               settings.ligament, dict(settings.bone_level_mm).get(fdi))
+    except CaseError as err:
+        raise CaseError(getattr(case, "path", None), err.field, err.problem, err.fix) from None
 
 
 def _closure_model(case: Case, dentition: Dentition, settings: MovementSettings, facing, extracted, orders):

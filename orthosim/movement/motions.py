@@ -1,5 +1,6 @@
 """Phase 2 of a step: each tooth's motion over the step under its free force (its mechanics, the
-wire, the rate law: `orthosim.mechanics.biomechanics.tooth_motion`); with a rectangular wire a
+wire, the rate law: `orthosim.mechanics.biomechanics.tooth_motion`, or with the ligament's stiffness
+`orthosim.mechanics.ligamentmotion.ligament_motion`); with a rectangular wire a
 blocked tooth follows a neighbour that gives way (teeth in contact move together).
 """
 
@@ -10,6 +11,7 @@ from typing import Mapping
 import numpy as np
 
 from orthosim.mechanics.biomechanics import Motion, tooth_motion
+from orthosim.mechanics.ligamentmotion import ligament_motion
 from orthosim.mechanics.vec import length
 from orthosim.movement.directions import contact_normal
 from orthosim.movement.forces import Forces
@@ -39,7 +41,9 @@ def motions(model: MovementModel, state: StepState, f: Forces, centers: Mapping[
         else:
             point = centers[n]
         translation_only = wire == "rectangular" and (not own or any(a.bodily for a in own))
-        m = tooth_motion(model.mechanics[n], poses[n], free, point, couple, wire, translation_only, s.rate)
+        mech = model.mechanics[n]
+        move = tooth_motion if mech.support is None else ligament_motion
+        m = move(mech, poses[n], free, point, couple, wire, translation_only, s.rate)
         if not m.is_still:
             out[n] = m
     if wire != "rectangular":

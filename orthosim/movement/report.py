@@ -17,7 +17,9 @@ deepest first, as {`pair`, `mm`}), `collisions` (count), `distances` (per adjace
 closes the bite after every step (`orthosim.movement.closure`) adds `bite` (the change in vertical
 dimension over the treatment, the opening at the molars, the condylar axis) and each lower tooth's
 `moved_in_mandible_mm`, and each line of steps.jsonl its step's `bite` (hinge angle, opening at the
-incisors and the molars in mm, the facing pairs in contact at closure and their count).
+incisors and the molars in mm, the facing pairs in contact at closure and their count). A run on
+crowns with estimated roots adds each moving tooth's `moved_mm_range` [low, high] (mm, over the
+plausible roots: `orthosim.movement.rootspread`) and `root_spread` (the ratio's ends and source).
 steps.jsonl: one JSON object per line, one line per step (step 0, the initial state, first): its
 time (days), the pose of every tooth, the touching pairs, the tooth-to-tooth distances and their
 total, the largest interpenetration, the collisions (with the impact response) and the propagated
@@ -48,6 +50,7 @@ from orthosim.storage.atomic import atomic_path, to_jsonable, write_json, write_
 from orthosim.geometry.motion import rotation_angle
 from orthosim.collision.interpenetration import start_depths
 from orthosim.mechanics.biomechanics import movement_type
+from orthosim.movement.rootspread import ROOT_CROWN_SPREAD, moved_ranges
 from orthosim.movement.simulation import MovementModel, StepRecord
 
 
@@ -84,6 +87,7 @@ class RunReport:
         self.max_penetration_mm = 0.0
         self.widest_bite_mm = 0.0  # the bite's largest opening at the incisors over the run (mm)
         self.collisions = 0
+        self._spread: dict | None = None  # FDI -> (low, high) mm over the root spread, once worked out
         self.steps_file = Path(steps_file) if steps_file is not None else None
         self._steps: IO[str] | None = None
         self.distances_file = Path(distances_file) if distances_file is not None else None
@@ -180,6 +184,7 @@ class RunReport:
             }
         for n, info in self._load_movements().items():
             teeth[str(n)].update(info)
+        spread = self._root_spread(teeth)
         bite = self._bite(teeth)
         s = m.settings
         return {
@@ -206,8 +211,23 @@ class RunReport:
             "distances": [{"pair": list(a.pair), "initial_mm": a.distance_mm, "final_mm": b.distance_mm}
                           for a, b in zip(first.distances, last.distances)],
             "per_step_file": STEPS_FILE,
+            **spread,
             **bite,
         }
+
+    def _root_spread(self, teeth: dict) -> dict:
+        """With estimated roots: each moving tooth's `moved_mm_range` over the plausible roots
+        (`orthosim.movement.rootspread`, which simulates the spread's two ends: worked out once) and
+        metrics.json's "root_spread"; {} when every root was seen."""
+        if self._spread is None:
+            moved = {int(n): v["moved_mm"] for n, v in teeth.items()}
+            self._spread = moved_ranges(self.model, self.detector, self.last.step, moved)
+        if not self._spread:
+            return {}
+        for n, (low, high) in self._spread.items():
+            teeth[str(n)]["moved_mm_range"] = [low, high]
+        return {"root_spread": {"root_crown_ratio_factors": list(ROOT_CROWN_SPREAD),
+                                "source": "Hoelttae et al. 2004, Eur J Orthod 26(5):491-497 (see orthosim.movement.rootspread)"}}
 
     def _bite(self, teeth: dict) -> dict:
         """metrics.json's "bite" when the run closes the bite (and each lower tooth's `moved_in_mandible_mm`,

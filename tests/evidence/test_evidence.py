@@ -3,7 +3,9 @@
 Each row of `orthosim/evidence/evidence.toml` is run on the model as `orthosim evidence` runs it
 (coarse parametric model, monthly steps: seconds) and must land where `VERDICTS` says: inside
 its published interval, or outside with the one-line reason the page shows. A new row needs its
-verdict here; a change to the model that moves a row across its interval fails here.
+verdict here; a change to the model that moves a row across its interval fails here. The
+validation rows (not fitted) are the table's claim: at least 10 of them, at least 8 inside, and
+every centre-of-resistance row among them and inside, predicted by the ligament from the root.
 """
 
 from __future__ import annotations
@@ -25,20 +27,29 @@ from orthosim.mechanics.biomechanics import DAYS_PER_MONTH, PARAMETER_SETS, Rate
 VERDICTS = {
     "monini2019_upper_canine_rate": "inside",
     "monini2019_lower_canine_rate": "inside",
+    "ccd2018_upper_canine_rate": "outside",  # the law is fitted to Monini's slower canines
+    "ccd2018_lower_canine_rate": "outside",  # likewise, and the bone factor to Monini's lower canine
     "theodorou2019_plateau_50_250": "inside",
     "theodorou2019_above_250": "outside",  # the law saturates: no faster above 250 cN
     "papageorgiou2005_cr_single_rooted": "inside",
     "papageorgiou2005_cr_single_rooted_real": "inside",
+    "yoshida_upper_incisor_cr": "inside",
+    "yoshida_upper_incisor_cr_real": "inside",
     "fea_upper_first_molar_cr": "inside",
     "fea_upper_first_molar_cr_real": "inside",
+    "fea_upper_first_molar_cr_lingual": "inside",
+    "fea_upper_first_molar_cr_lingual_real": "inside",
     "smith_burstone1984_controlled_tipping": "inside",
+    "smith_burstone1984_controlled_tipping_real": "inside",
     "smith_burstone1984_translation": "inside",
-    "smith_burstone1984_root_movement": "inside",
+    "smith_burstone1984_translation_real": "inside",
     "ccd2018_canine_retraction_molar_anchorage": "inside",
     "ccd2018_lower_canine_retraction_molar_anchorage": "outside",  # the lower molars stay under the threshold
     "ccd2018_canine_retraction_implant_anchorage": "inside",
     "becker2018_en_masse_anchorage_difference": "inside",
 }
+FITTED = {"monini2019_upper_canine_rate", "monini2019_lower_canine_rate", "theodorou2019_plateau_50_250",
+          "ccd2018_canine_retraction_molar_anchorage", "becker2018_en_masse_anchorage_difference"}
 ROWS = load_evidence()
 PARAMETRIC = [r.id for r in ROWS if r.model == "parametric"]
 REAL = [r.id for r in ROWS if r.model == "real"]
@@ -58,6 +69,28 @@ def test_every_row_of_the_table_has_a_verdict_held_here_and_the_table_has_every_
     assert set(VERDICTS) == {r.id for r in ROWS}
     assert len(ROWS) >= 8
     assert {r.topic for r in ROWS} == {"rate", "rate vs force", "centre of resistance", "M/F", "anchorage"}
+
+
+def test_the_table_claims_ten_validation_rows_eight_inside_and_every_centre_of_resistance_row_among_them():
+    validation = [r for r in ROWS if not r.fitted]
+    assert {r.id for r in ROWS if r.fitted} == FITTED
+    assert len(validation) >= 10 and sum(VERDICTS[r.id] == "inside" for r in validation) >= 8
+    centres = [r for r in ROWS if r.topic == "centre of resistance"]
+    assert len({r.source for r in centres}) >= 3 and {r.model for r in centres} == {"parametric", "real"}
+    assert all(not r.fitted and VERDICTS[r.id] == "inside" for r in centres)
+    assert all(not r.fitted for r in ROWS if r.topic == "M/F")
+
+
+def test_every_row_can_fail_a_finite_interval_around_a_published_number_no_wider_than_it():
+    for r in ROWS:
+        assert math.isfinite(r.mean) and r.low <= r.mean <= r.high, r.id
+        assert r.high - r.low <= max(abs(r.mean), 1.0), r.id
+
+
+def test_the_fit_uses_exactly_the_rows_marked_fitted():
+    from orthosim.evidence.calibration import fitted_rows
+
+    assert {r.id for r in fitted_rows(ROWS)} == FITTED
 
 
 @pytest.mark.parametrize("row_id", PARAMETRIC)
@@ -147,13 +180,34 @@ def test_a_bad_biomechanics_table_is_one_line_naming_the_file_and_field_with_exi
 
 def test_a_damaged_evidence_table_names_the_file_and_the_row(tmp_path):
     text = Path(load_evidence.__defaults__[0]).read_text()
+    ratio = next(i for i, r in enumerate(ROWS) if r.kind == "rate_ratio")
     bad = tmp_path / "evidence.toml"
     bad.write_text(text.replace('kind = "rate_ratio"', 'kind = "ratio"', 1))
-    with pytest.raises(CaseError, match=r"evidence\.toml.*rows\[2\]\.kind.*unknown kind 'ratio'"):
+    with pytest.raises(CaseError, match=rf"evidence\.toml.*rows\[{ratio}\]\.kind.*unknown kind 'ratio'"):
         load_evidence(bad)
     bad.write_text(text.replace("low = 0.71", "low = 0.9", 1))
     with pytest.raises(CaseError, match=r"rows\[0\]\.high.*interval \[0.9, 0.72\] is empty"):
         load_evidence(bad)
+
+
+@pytest.mark.parametrize("row_id, old, new, field, words", [
+    ("papageorgiou2005_cr_single_rooted", "low = 33.0\n", "low = 0.0\n", "high", "wider than 37.5, so the row could hardly fail"),
+    ("ccd2018_canine_retraction_implant_anchorage", "high = 0.6\n", "high = 1.5\n", "high", "wider than 1"),
+    ("monini2019_upper_canine_rate", "mean = 0.715\n", "", "mean", "a source that gives a class and no number is no row"),
+    ("monini2019_upper_canine_rate", "high = 0.72\n", "high = inf\n", "high", "must be finite"),
+    ("monini2019_upper_canine_rate", "mean = 0.715\n", "mean = 0.8\n", "mean", "outside its interval"),
+    ("monini2019_upper_canine_rate", "fitted = true\n", "", "fitted", "write fitted = true when the value was used to fit a constant"),
+])
+def test_a_row_that_could_not_fail_or_hides_its_role_is_refused_in_one_line(tmp_path, row_id, old, new, field, words):
+    text = Path(load_evidence.__defaults__[0]).read_text()
+    index = [r.id for r in ROWS].index(row_id)
+    start = text.index(f'id = "{row_id}"')
+    bad = tmp_path / "evidence.toml"
+    bad.write_text(text[:start] + text[start:].replace(old, new, 1))
+    with pytest.raises(CaseError) as err:
+        load_evidence(bad)
+    message = str(err.value)
+    assert "\n" not in message and str(bad) in message and f"rows[{index}].{field}" in message and words in message, message
 
 
 @pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
@@ -169,6 +223,10 @@ def test_the_evidence_page_opens_in_headless_chromium_with_a_plot_per_row(tmp_pa
     assert done.returncode == 0, done.stderr
     data = json.loads((out / "evidence.json").read_text())
     assert [r["id"] for r in data["rows"]] == [r.id for r in ROWS]
+    assert {r["id"] for r in data["rows"] if r["fitted"]} == FITTED
+    ran = [r for r in data["rows"] if r["status"] != "skipped"]
+    assert data["validation"]["inside"] == sum(r["status"] == "inside" and not r["fitted"] for r in ran)
+    assert data["calibration"] == {"rows": len(FITTED), "inside": len(FITTED), "outside": 0, "skipped": 0}
     assert {r["id"]: r["status"] for r in data["rows"] if r["status"] != "skipped"} == {
         k: v for k, v in VERDICTS.items() if k in PARAMETRIC}
     page = load_page(out / "index.html", window=(1400, 1600))
@@ -179,6 +237,8 @@ def test_the_evidence_page_opens_in_headless_chromium_with_a_plot_per_row(tmp_pa
     assert shot.shape[1] >= 1400 and green > 0.0005, green
     html = (out / "index.html").read_text()
     assert "outside: the rate law saturates" in html
+    assert html.index('id="validation"') < html.index('id="calibration"')  # the two lists apart, validation first
+    assert f"{data['validation']['inside']} of {len([r for r in ran if not r['fitted']])} validation rows inside" in html
     # a rerun into the same folder replaces it whole
     assert orthosim("evidence", "--out", str(out), "--no-real").returncode == 0
 
