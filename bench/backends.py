@@ -22,6 +22,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from orthosim_bench.subruns import SubRunFailed, exit_failure
+
 _MARK = "render_backends:"
 
 
@@ -70,17 +72,19 @@ class _Child:
         for line in self.proc.stdout:
             if line.startswith(_MARK):
                 return json.loads(line[len(_MARK):])
-        raise RuntimeError(f"render bench through {self.backend} exited with {self.proc.wait()} (its stderr says why)")
+        raise SubRunFailed("render_backends", exit_failure("render_backends", f"the render bench through {self.backend}",
+                                                           self.proc.wait(), "(its standard error, above, says why)").why)
 
     def draw(self, frames: int) -> dict:
         self.proc.stdin.write(f"{frames}\n")
         self.proc.stdin.flush()
         return self._read()
 
-    def close(self) -> None:
+    def close(self) -> int:
+        """Ends the child; its exit status."""
         if self.proc.stdin and not self.proc.stdin.closed:
             self.proc.stdin.close()
-        self.proc.wait()
+        return self.proc.wait()
 
 
 def render_backends(case: str | Path, size: tuple[int, int] = (640, 480), frames: int = 150, warmup: int = 20,
@@ -111,8 +115,11 @@ def render_backends(case: str | Path, size: tuple[int, int] = (640, 480), frames
                 times[child.backend] += turn["times"]
                 cpu[child.backend] += turn["cpu_s"]
     finally:
-        for child in children:
-            child.close()
+        codes = {child.backend: child.close() for child in children}
+    failed = {backend: code for backend, code in codes.items() if code != 0}
+    if failed:  # a backend's figures are those of a child that finished cleanly, or none
+        backend, code = next(iter(failed.items()))
+        raise SubRunFailed("render_backends", exit_failure("render_backends", f"the render bench through {backend}", code).why)
     fps = {c.backend: {"fps": 1.0 / statistics.median(times[c.backend]), "frames": len(times[c.backend]),
                        "cpu_ms_per_frame": 1000.0 * cpu[c.backend] / len(times[c.backend]),
                        "gl_renderer": c.info["gl_renderer"], "gl_version": c.info["gl_version"]} for c in children}

@@ -36,6 +36,7 @@ from orthosim.batch.execute import BatchOptions, prebuild_trees, run_batch
 from orthosim.batch.plan import parse_sweep, plan_batch
 from orthosim.batch.worker import RunCase
 from orthosim.runtime.options import RenderOptions, RunOptions
+from orthosim_bench.subruns import last_line
 
 TARGET_RATIO = 1.8
 RUNS = 24
@@ -70,7 +71,8 @@ def batch_throughput(run_case: RunCase, case: str | Path, *, runs: int = RUNS, d
                     "frames_per_run": variants[0].steps * frames_per_step + 1, "size": list(size),
                     "batch_size_why": f"{len(variants)} runs: each of 2 workers runs {len(variants) // 2}, so a worker's "
                                       "start-up (about 2 s of CPU, once) is a small share, as in a real batch of hundreds",
-                    "target_ratio_2_to_1": TARGET_RATIO, "cores": cores, "load_average_start": list(os.getloadavg())}
+                    "target_ratio_2_to_1": TARGET_RATIO, "cores": cores, "load_average_start": list(os.getloadavg()),
+                    "failures": []}
     with tempfile.TemporaryDirectory(prefix="orthosim-bench-batch-") as tmp:
         prebuild_trees([Path(case)])
         for workers in worker_counts:
@@ -83,12 +85,14 @@ def batch_throughput(run_case: RunCase, case: str | Path, *, runs: int = RUNS, d
             wall = time.perf_counter() - started
             cpu = _children_cpu_s() - cpu0  # the pool's workers are joined when run_batch returns
             failed = [f"{r.run_id}: {r.error}" for r in rows if r.status != "ok"]
-            if failed:
+            if failed:  # a batch with a failed run has no throughput: null, and the bench says why
                 record[f"errors_{name}"] = failed
+                record["failures"].append({"figure": f"per_minute_{name}",
+                                           "why": f"{len(failed)} of {len(rows)} runs failed; first: {last_line(failed[0])}"})
             run_walls = [r.wall_s for r in rows if r.status == "ok" and r.wall_s is not None]
             run_cpu = [r.extra["cpu_s"] for r in rows if r.status == "ok" and "cpu_s" in r.extra]
             record[f"wall_s_{name}"] = wall
-            record[f"per_minute_{name}"] = (len(rows) - len(failed)) / wall * 60.0
+            record[f"per_minute_{name}"] = None if failed else len(rows) / wall * 60.0
             record[f"detail_{name}"] = {
                 "load_average_1min_before": load,
                 "workers_cpu_s_per_run": cpu / max(len(rows), 1),
@@ -104,7 +108,8 @@ def batch_throughput(run_case: RunCase, case: str | Path, *, runs: int = RUNS, d
             }
     one, two = record.get("per_minute_1_worker"), record.get("per_minute_2_workers")
     record["ratio_2_to_1"] = two / one if one and two is not None else None
-    record["meets_target"] = record["ratio_2_to_1"] is not None and record["ratio_2_to_1"] >= TARGET_RATIO
+    # a ratio whose either side did not run is null, and so is its verdict: never met
+    record["meets_target"] = None if record["ratio_2_to_1"] is None else record["ratio_2_to_1"] >= TARGET_RATIO
     busy_1 = (record.get("detail_1_worker") or {}).get("cores_busy")
     # two workers gain at most 2x, and no more than the cores one worker leaves idle allow
     record["ratio_ceiling"] = min(2.0, cores / busy_1) if busy_1 else None

@@ -28,6 +28,7 @@ Linux only (/proc).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import subprocess
@@ -37,6 +38,8 @@ import time
 import tomllib
 from dataclasses import asdict, dataclass
 from pathlib import Path
+
+from orthosim_bench.subruns import exit_failure, last_line
 
 TARGET_MB = 500.0
 
@@ -57,7 +60,8 @@ class PeakMemory:
     process_peaks_mb: tuple[tuple[str, float], ...]  # (command name, VmHWM MB) of each process seen, largest first
     samples: int
     wall_s: float
-    exit_code: int
+    exit_code: int  # the run's exit status: any but 0 and its figures are null (`memory_timings`)
+    stderr_tail: str = ""  # the run's last line of standard error, where it was kept
 
 
 def _children(pid: int) -> list[int]:
@@ -180,16 +184,18 @@ def _tree(pid: int) -> list[int]:
 
 
 def measure_peak_memory(argv: list[str], *, cwd: str | Path | None = None, env: dict | None = None,
-                        interval_s: float = 0.05, unique_interval_s: float = 1.0, timeout_s: float = 3600.0) -> PeakMemory:
+                        interval_s: float = 0.05, unique_interval_s: float = 1.0, timeout_s: float = 3600.0,
+                        stderr=subprocess.DEVNULL) -> PeakMemory:
     """Run `argv` as a child process to its end and return its peak memory (`PeakMemory`, MB).
 
-    Output is discarded. A run still going after `timeout_s` is killed (its exit code then says so).
+    Standard output is discarded, standard error too unless `stderr` (a file) is given. A run still
+    going after `timeout_s` is killed (its exit code then says so).
     """
     if not os.path.isdir("/proc/self/task"):
         raise OSError("measuring a process tree's memory needs Linux's /proc")
     t0 = time.perf_counter()
     proc = subprocess.Popen(argv, cwd=cwd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+                            stderr=stderr)
     tree_kb, pss_kb, hwm_kb, samples, seen, names = 0, 0, {}, 0, set(), {}
     dirty_kb = uss_kb = 0
     unique_kb: int | None = 0
@@ -240,71 +246,116 @@ def _orthosim_argv(*args: str | Path) -> list[str]:
     return [sys.executable, "-c", "from orthosim.cli import entry; entry()", *map(str, args)]
 
 
+def long_run_step_days(case_step_days: float, steps: int) -> float:
+    """Days per step for a run of `steps` steps that stays within the case ranges' longest treatment
+    (`orthosim.exchange.case.RANGES["duration_days"]`, five years): the case's own step when that fits,
+    else a shorter one (0.18 days for 10,000 steps), rounded down to 0.01 day."""
+    from orthosim.exchange.case import RANGES
+
+    longest_days = RANGES["duration_days"][1]
+    if steps * case_step_days <= longest_days:
+        return case_step_days
+    return math.floor(100.0 * longest_days / steps) / 100.0
+
+
 def _case_with_steps(case: Path, steps: int, folder: Path) -> Path:
-    """A copy of `case` in `folder` whose treatment lasts `steps` steps of its own length (mesh folders made absolute)."""
+    """A copy of `case` in `folder` whose treatment lasts `steps` steps (the case's own step, or a
+    shorter one so that the treatment stays within the case ranges: `long_run_step_days`; mesh
+    folders made absolute). Checked as a case before any child runs it."""
     import tomli_w
 
     from orthosim.exchange.case import load_case
 
     loaded = load_case(case)  # validated first: a bad case is the bench's error, not a child's
+    step_days = long_run_step_days(loaded.step_days, steps)
     raw = tomllib.loads(Path(case).read_text())
-    raw.setdefault("treatment", {})["duration_days"] = steps * loaded.step_days
+    raw.setdefault("treatment", {})["step_days"] = step_days
+    raw["treatment"]["duration_days"] = round(steps * step_days, 6)
     model = raw.get("model", {})
     if "folder" in model:
         model["folder"] = ([str(f) for f in loaded.model.folders] if isinstance(model["folder"], list)
                            else str(loaded.model.folder))
     out = folder / f"{Path(case).stem}_{steps}_steps.toml"
     out.write_text(tomli_w.dumps(raw))
+    if load_case(out).steps != steps:  # the copy must be a case the ranges allow, of the steps asked
+        raise ValueError(f"{out.name}: {load_case(out).steps} steps, not {steps}")
     return out
+
+
+def _measured_run(argv: list[str], folder: Path, name: str) -> PeakMemory:
+    """`measure_peak_memory` of one `orthosim run`, its standard error kept in `folder` for a failure's line."""
+    env = dict(os.environ)  # ORTHOSIM_GL / PYOPENGL_PLATFORM: the backend this bench chose
+    with open(folder / f"{name}.stderr", "w+b") as err:
+        peak = measure_peak_memory(argv, env=env, stderr=err)
+        err.seek(0)
+        said = err.read()[-4000:]
+    return dataclasses.replace(peak, stderr_tail=last_line(said))
 
 
 def memory_timings(case: str | Path, *, steps: int = 10_000, frames: int = 2_000, size: tuple[int, int] = (640, 480),
                    work_dir: str | Path | None = None) -> dict:
     """The bench's `memory` record: peak MB of a `steps`-step run without rendering and of a run drawn
-    into at least `frames` frames at `size`, each `orthosim run` in a fresh child process."""
+    into at least `frames` frames at `size`, each `orthosim run` in a fresh child process. A run that
+    exits non-zero leaves its figure null, its `meets_target` null and a line in `failures`."""
     from orthosim.exchange.case import load_case
 
     load_start = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="orthosim-memory-", dir=work_dir) as tmp:
         tmp = Path(tmp)
         long_case = _case_with_steps(Path(case), steps, tmp)
-        env = dict(os.environ)  # ORTHOSIM_GL / PYOPENGL_PLATFORM: the backend this bench chose
-        no_render = measure_peak_memory(_orthosim_argv("run", long_case, "--out", tmp / "no_render", "--no-render",
-                                                       "--quiet"), env=env)
+        no_render = _measured_run(_orthosim_argv("run", long_case, "--out", tmp / "no_render", "--no-render", "--quiet"),
+                                  tmp, "no_render")
         case_steps = load_case(case).steps
         per_step = max(1, math.ceil((frames - 1) / case_steps))
         drawn_frames = 1 + case_steps * per_step
-        rendered = measure_peak_memory(_orthosim_argv("run", case, "--out", tmp / "render", "--frames-per-step",
-                                                      per_step, "--size", f"{size[0]}x{size[1]}", "--quiet"), env=env)
+        rendered = _measured_run(_orthosim_argv("run", case, "--out", tmp / "render", "--frames-per-step", per_step,
+                                                "--size", f"{size[0]}x{size[1]}", "--quiet"), tmp, "render")
+    record = _memory_record(no_render, rendered)
+    record["run_no_render"] = {"case": str(case), "steps": steps, "step_days": long_run_step_days(load_case(case).step_days, steps),
+                               **asdict(no_render)}
+    record["render"] = {"case": str(case), "steps": case_steps, "frames_per_step": per_step, "frames": drawn_frames,
+                        "size": list(size), **asdict(rendered)}
+    record["load_average_start"] = list(load_start)
+    record["load_average_end"] = list(os.getloadavg())
+    return record
+
+
+def _memory_record(no_render: PeakMemory, rendered: PeakMemory) -> dict:
+    """The figures of the two runs; a run that failed gives nulls and a failure (orthosim_bench.subruns)."""
+    runs = {"run_10k_steps_no_render": no_render, "render_2000_frames": rendered}
+    ok = {name: peak.exit_code == 0 for name, peak in runs.items()}
+
+    def figure(name: str, value: float) -> float | None:
+        return value if ok[name] else None
+
+    failures = [asdict(exit_failure(f"{name}_mb", "orthosim run", peak.exit_code, peak.stderr_tail))
+                for name, peak in runs.items() if not ok[name]]
     # The headline is private memory: pages only the run's processes hold and have written (heap,
     # arrays, copies made on write; Private_Dirty). That is what the kernel cannot take back without
     # swap; a library's clean pages (numba's and llvmpipe's LLVM) it drops by itself under pressure.
-    record = {
-        "run_10k_steps_no_render_mb": no_render.tree_private_dirty_peak_mb,
-        "render_2000_frames_mb": rendered.tree_private_dirty_peak_mb,
+    return {
+        "run_10k_steps_no_render_mb": figure("run_10k_steps_no_render", no_render.tree_private_dirty_peak_mb),
+        "render_2000_frames_mb": figure("render_2000_frames", rendered.tree_private_dirty_peak_mb),
         "target_mb": TARGET_MB,
-        "meets_target": {"run_10k_steps_no_render": no_render.exit_code == 0 and no_render.tree_private_dirty_peak_mb < TARGET_MB,
-                         "render_2000_frames": rendered.exit_code == 0 and rendered.tree_private_dirty_peak_mb < TARGET_MB},
+        # a run that did not finish meets nothing: null, never true
+        "meets_target": {name: (peak.tree_private_dirty_peak_mb < TARGET_MB if ok[name] else None)
+                         for name, peak in runs.items()},
+        "failures": failures,
         # the distinct resident pages of the tree (libraries' clean pages included), as before
-        "run_10k_steps_no_render_resident_mb": no_render.peak_mb,
-        "render_2000_frames_resident_mb": rendered.peak_mb,
-        "run_no_render": {"case": str(case), "steps": steps, **asdict(no_render)},
-        "render": {"case": str(case), "steps": case_steps, "frames_per_step": per_step, "frames": drawn_frames,
-                   "size": list(size), **asdict(rendered)},
+        "run_10k_steps_no_render_resident_mb": figure("run_10k_steps_no_render", no_render.peak_mb),
+        "render_2000_frames_resident_mb": figure("render_2000_frames", rendered.peak_mb),
         # private memory: pages only the run's processes hold; Private_Dirty (heap, arrays, written
         # copies) is what the kernel cannot take back without swap, whatever a process does with its
         # clean file pages (libraries, which the kernel drops itself under pressure)
-        "run_10k_steps_no_render_uss_mb": no_render.tree_uss_peak_mb,
-        "render_2000_frames_uss_mb": rendered.tree_uss_peak_mb,
-        "run_10k_steps_no_render_rss_mb": no_render.tree_rss_sampled_peak_mb,
-        "render_2000_frames_rss_mb": rendered.tree_rss_sampled_peak_mb,
-        "render_2000_frames_pss_mb": rendered.tree_pss_sampled_peak_mb,
+        "run_10k_steps_no_render_uss_mb": figure("run_10k_steps_no_render", no_render.tree_uss_peak_mb),
+        "render_2000_frames_uss_mb": figure("render_2000_frames", rendered.tree_uss_peak_mb),
+        "run_10k_steps_no_render_rss_mb": figure("run_10k_steps_no_render", no_render.tree_rss_sampled_peak_mb),
+        "render_2000_frames_rss_mb": figure("render_2000_frames", rendered.tree_rss_sampled_peak_mb),
+        "render_2000_frames_pss_mb": figure("render_2000_frames", rendered.tree_pss_sampled_peak_mb),
         "measure": rendered.peak_measure,
         "how": "orthosim run in a fresh child process; headline: peak of the summed Private_Dirty of its process "
                "tree (/proc/PID/smaps_rollup), with the USS beside it; *_resident_mb: peak of the distinct physical "
                "pages resident in the tree (each page once: /proc/PID/pagemap; PSS where page frames are hidden), at "
-               "least the largest VmHWM of one process; the summed RSS and PSS beside them",
-        "load_average_start": list(load_start),
-        "load_average_end": list(os.getloadavg()),
+               "least the largest VmHWM of one process; the summed RSS and PSS beside them; a run that exits "
+               "non-zero gives nulls and a line in failures",
     }
-    return record

@@ -61,6 +61,7 @@ import numpy as np
 
 from orthosim.exchange.case import DEFAULT_CASE  # the paper's case 1, as the demo: ~1,100-1,400 contact spheres a step
 from orthosim_bench.spheretree import tree_build_timings
+from orthosim_bench.subruns import as_records, gather, guarded
 
 from orthosim_render.cputime import cpu_ms_per_frame, cpu_snapshot
 from orthosim_render.frame_state import FrameState
@@ -370,7 +371,8 @@ def run_bench(case: str | Path | None = None, *, run_case=None, **options) -> di
     plan = BenchPlan(case=case, **options)
     t_start, load_start = time.perf_counter(), os.getloadavg()
     model = _BenchModel.load(plan)
-    before = _before_gl(plan, model, run_case)
+    failures: list = []  # orthosim_bench.subruns.Failure of every sub-run that failed or was refused
+    before = _before_gl(plan, model, run_case, failures)
     synthetic = SyntheticMotion(model.dentition, n_markers=plan.n_markers)
     states = [synthetic(i) for i in range(plan.n_states)]  # render alone: the same states for every variant
     mem_start = rss_mb()
@@ -394,36 +396,40 @@ def run_bench(case: str | Path | None = None, *, run_case=None, **options) -> di
                                 rounds=plan.variant_rounds)
     record = _record(plan, model, before, gl, _median_fps(render_times), e2e_synthetic, simulated, pending, memory_mb,
                      variants, load_start)
-    _optional_studies(plan, record)
+    _optional_studies(plan, record, failures)
+    record["failures"] = as_records(failures)
     record["wall_s"] = time.perf_counter() - t_start
     return record
 
 
-def _before_gl(plan: BenchPlan, model: _BenchModel, run_case) -> dict:
+def _before_gl(plan: BenchPlan, model: _BenchModel, run_case, failures: list) -> dict:
     """The figures taken before this process holds a GL context or threads: `orthosim run` launched
     to its first step, the model's sphere trees built from nothing (over every core and, as the
-    baseline, in one process), staging, and batch throughput (its workers get the cores)."""
+    baseline, in one process), staging, and batch throughput (its workers get the cores). Each is a
+    sub-run: one that fails leaves its figure None and a `Failure` in `failures` (orthosim_bench.subruns)."""
     out: dict = {"startup": None, "trees": None, "staged": None, "batch": None, "scan": None}
     if plan.startup:
         from orthosim_bench.startup import startup_timings  # warm caches
 
-        out["startup"] = startup_timings(plan.case_path)
+        out["startup"] = guarded("startup", failures, lambda: startup_timings(plan.case_path))
     if plan.scan:
         from orthosim_bench.scanarch import labelled_scan_timings
 
-        out["scan"] = labelled_scan_timings()
+        out["scan"] = guarded("labelled_scan", failures, labelled_scan_timings)
     if plan.tree_build:
-        out["trees"] = tree_build_timings(model.dentition)
+        out["trees"] = guarded("spheretree_build", failures, lambda: tree_build_timings(model.dentition))
     if plan.staging:
         from orthosim_bench.staging import staging_timings
 
-        out["staged"] = staging_timings()
+        out["staged"] = guarded("staging", failures, staging_timings)
+        gather(out["staged"], "staging", failures)
     if plan.batch:
         from orthosim_bench.batch import batch_throughput
 
         if run_case is None:
             raise ValueError("run_bench(batch=True) needs run_case, the CLI's run of one case")
-        out["batch"] = batch_throughput(run_case, plan.case_path)
+        out["batch"] = guarded("batch", failures, lambda: batch_throughput(run_case, plan.case_path))
+        gather(out["batch"], "batch", failures)
     return out
 
 
@@ -590,7 +596,8 @@ def _meets_targets(fps_sim, fps_render: float, e2e: dict, before: dict, collisio
         "end_to_end_60": e2e["fps"] >= E2E_TARGET_FPS,
         "spheretree_build": None if trees is None else trees["meets_target"],
         "staging": None if staged is None else staged["setup_28_teeth"]["staging_s"] < staged["setup_28_teeth"]["target_s"],
-        "stage_verify": None if staged is None else staged["verify_28_teeth"]["command_s"] < staged["verify_28_teeth"]["target_s"],
+        "stage_verify": (None if staged is None or staged["verify_28_teeth"]["command_s"] is None
+                         else staged["verify_28_teeth"]["command_s"] < staged["verify_28_teeth"]["target_s"]),
         "collision": None if collision is None else {
             k: (v is not None and 1e6 / v >= TARGET_FPS) for k, v in collision.get("collision_us_per_step", {}).items()},
     }
@@ -643,21 +650,23 @@ def _record(plan: BenchPlan, model: _BenchModel, before: dict, gl: dict, fps_ren
     }
 
 
-def _optional_studies(plan: BenchPlan, record: dict) -> None:
-    """The studies a bench run adds on request, each in its own fresh processes or renderer."""
+def _optional_studies(plan: BenchPlan, record: dict, failures: list) -> None:
+    """The studies a bench run adds on request, each in its own fresh processes or renderer; each a
+    sub-run whose failure leaves its figures None and a `Failure` in `failures`."""
     if plan.memory:  # peak memory of a 10,000-step run and a 2,000-frame render, each in a fresh child process
         from orthosim_bench.memory import memory_timings
 
-        record["memory"] = memory_timings(plan.case_path, size=plan.size)
-        record["meets_target"]["memory"] = record["memory"]["meets_target"]
+        record["memory"] = guarded("memory", failures, lambda: memory_timings(plan.case_path, size=plan.size))
+        gather(record["memory"], "memory", failures)
+        record["meets_target"]["memory"] = None if record["memory"] is None else record["memory"]["meets_target"]
     if plan.report:  # the paper's three cases x three detectors, from runs made (or kept) beforehand
         from orthosim_bench.report import report_timings
 
-        record["report"] = report_timings(plan.report_runs)
-        record["report_s"] = record["report"]["report_s"]
-        record["meets_target"]["report"] = record["report"]["meets_target"]
+        record["report"] = guarded("report", failures, lambda: report_timings(plan.report_runs))
+        record["report_s"] = None if record["report"] is None else record["report"]["report_s"]
+        record["meets_target"]["report"] = None if record["report"] is None else record["report"]["meets_target"]
     if plan.labels:  # semantic goldens: the label pass against a golden's render, 320x240
         from orthosim_bench.labels import label_pass_timings
 
-        record["label_pass"] = label_pass_timings()
-        record["meets_target"]["label_pass"] = record["label_pass"]["meets_target"]
+        record["label_pass"] = guarded("label_pass", failures, label_pass_timings)
+        record["meets_target"]["label_pass"] = None if record["label_pass"] is None else record["label_pass"]["meets_target"]

@@ -20,6 +20,7 @@ from orthosim.exchange.case import CASES_DIR
 from orthosim.collision.detectors import PAPER_DETECTORS as DETECTORS
 from orthosim.runtime.runfolder import RunFolderError, read_finished_run
 from orthosim.storage.checksums import file_sha256
+from orthosim_bench.subruns import SubRunFailed, exit_failure
 
 PAPER_CASES = ("case1_first_premolar_extraction.toml", "case2_second_premolar_extraction.toml",
                "case3_incisor_space_closure.toml")
@@ -36,7 +37,10 @@ def _ensure_run(case: Path, detector: str, run_dir: Path) -> bool:
         pass
     cmd = [sys.executable, "-c", "from orthosim.cli import entry; entry()", "run", str(case), "--detector", detector,
            "--no-render", "--out", str(run_dir)]
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    if done.returncode != 0:  # the report's figure needs every run: this one's failure is the figure's
+        raise SubRunFailed("report", exit_failure("report", f"orthosim run {case.name} --detector {detector}",
+                                                  done.returncode, done.stderr).why)
     return True
 
 

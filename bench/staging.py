@@ -13,6 +13,9 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import asdict
+
+from orthosim_bench.subruns import exit_failure, gather
 
 TARGET_S = 10.0
 VERIFY_TARGET_S = 60.0  # `orthosim stage verify` of 30 stages of 28 teeth, on two cores
@@ -67,7 +70,11 @@ def verify_timing(work_dir) -> dict:
     t3 = time.perf_counter()
     done = subprocess.run(cmd, capture_output=True, text=True)
     command_s = time.perf_counter() - t3
-    return {"command_s": command_s, "certify_s": certify_s, "command_exit": done.returncode, "teeth": verdict.teeth, "stages": verdict.stages, "holds": verdict.holds, "load_s": t1 - t0,
+    failures = []
+    if done.returncode != 0:  # its time is no figure: null, and the bench says why
+        failures.append(asdict(exit_failure("command_s", "orthosim stage verify", done.returncode, done.stderr)))
+        command_s = None
+    return {"failures": failures, "command_s": command_s, "certify_s": certify_s, "command_exit": done.returncode, "teeth": verdict.teeth, "stages": verdict.stages, "holds": verdict.holds, "load_s": t1 - t0,
             "planning_s": run.plan.planning_s, "verify_to_planning": (t2 - t1) / run.plan.planning_s,
             "verify_s": t2 - t1, "total_s": t2 - t0, "target_s": VERIFY_TARGET_S, "step_mm": verdict.step_mm,
             "pair_stages": verdict.pairs_checked, "fcl_queries": verdict.fcl_queries,
@@ -114,7 +121,10 @@ def staging_timings() -> dict:
 
     with tempfile.TemporaryDirectory(prefix="orthosim-bench-verify-") as work:
         verify = verify_timing(work)
+    failures: list = []
+    gather(verify, "verify_28_teeth", failures)
     return {
+        "failures": [asdict(f) for f in failures],
         "cases": cases,
         "verify_28_teeth": verify,
         "setup_28_teeth": {"teeth": len(plan.teeth), "stages": plan.n_stages, "lower_bound": plan.lower_bound,

@@ -19,7 +19,7 @@ def summary_lines(record: dict, out_file) -> list[str]:
     fps = record["fps"]
     shown = ", ".join(f"{k} {v:.1f}" if v is not None else f"{k} pending" for k, v in fps.items())
     lines.append(f"fps (median, target {record['target_fps']}): {shown} -> {out_file}")
-    for part in (_startup, _trees, _label_pass, _staging, _report, _batch, _memory):
+    for part in (_startup, _trees, _label_pass, _staging, _report, _batch, _memory, _failures):
         lines += part(record)
     return lines
 
@@ -28,7 +28,7 @@ def _startup(record: dict) -> list[str]:
     st = record.get("startup")
     if not st:
         return []
-    return [f"start-up: first step {st['startup_s']:.2f} s after launching `orthosim run` (target {st['target_s']:.0f} s; "
+    return [f"start-up: first step {st['startup_s']:.2f} s after launching `orthosim run` (target {st['target_s']:.1f} s; "
             f"bare python {st['python_start_s']:.2f} s, load {st['load_avg_1min']:.1f})"]
 
 
@@ -69,17 +69,33 @@ def _report(record: dict) -> list[str]:
             f"(target {r['target_s']:.0f} s), PDF {r['pdf_s']:.1f} s"]
 
 
+def _figure(value: float | None, spec: str) -> str:
+    """`value` formatted, or "null (failed)" for a figure whose sub-run failed (orthosim_bench.subruns):
+    a missing figure, or a ratio whose baseline did not run, never reads as a number or as met."""
+    return "null (failed)" if value is None else format(value, spec)
+
+
 def _batch(record: dict) -> list[str]:
     b = record.get("batch")
     if not b:
         return []
-    return [f"batch: {b['per_minute_1_worker']:.2f} animations/min with 1 worker, {b['per_minute_2_workers']:.2f} "
-            f"with 2 (x{b['ratio_2_to_1']:.2f}, target x{b['target_ratio_2_to_1']})"]
+    return [f"batch: {_figure(b.get('per_minute_1_worker'), '.2f')} animations/min with 1 worker, "
+            f"{_figure(b.get('per_minute_2_workers'), '.2f')} with 2 (x{_figure(b['ratio_2_to_1'], '.2f')}, "
+            f"target x{b['target_ratio_2_to_1']})"]
 
 
 def _memory(record: dict) -> list[str]:
     m = record.get("memory")
     if not m:
         return []
-    return [f"peak private memory: {m['run_10k_steps_no_render_mb']:.0f} MB for {m['run_no_render']['steps']} steps without "
-            f"rendering, {m['render_2000_frames_mb']:.0f} MB for {m['render']['frames']} frames (target {m['target_mb']:.0f} MB)"]
+    return [f"peak private memory: {_figure(m['run_10k_steps_no_render_mb'], '.0f')} MB for {m['run_no_render']['steps']} "
+            f"steps of {m['run_no_render'].get('step_days', '?')} days without rendering, "
+            f"{_figure(m['render_2000_frames_mb'], '.0f')} MB for {m['render']['frames']} frames (target {m['target_mb']:.0f} MB)"]
+
+
+def _failures(record: dict) -> list[str]:
+    failed = record.get("failures") or []
+    if not failed:
+        return []
+    return [f"{len(failed)} sub-run(s) failed or were refused; their figures are null: "
+            + ", ".join(f["figure"] for f in failed)]

@@ -46,9 +46,11 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
+    Exits 1 when a sub-run failed or was refused (its figure null, a line on stderr naming it).
     """
     select_gl(gl)
     from orthosim_bench.render import run_bench
+    from orthosim_bench.subruns import Failure, as_records, guarded
     from orthosim_bench.summary import summary_lines
 
     from orthosim.cli.run import run_for_batch
@@ -59,16 +61,22 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
                        step_days=step_days, tree_build=not no_tree_build, startup=not no_startup,
                        staging=not no_staging, batch=not no_batch, report=not no_report, report_runs=report_runs,
                        memory=not no_memory, run_case=run_for_batch, labels=labels, scan=not no_scan)
+    failures = [Failure(**f) for f in record["failures"]]
     if closure_case is not None:
         from orthosim_bench.closure import closure_timings
 
-        record["closure"] = closure_timings(closure_case)
+        record["closure"] = guarded("closure", failures, lambda: closure_timings(closure_case))
     if not no_backends:  # after run_bench closed its renderer: each backend draws in a process of its own
         from orthosim.exchange.case import DEFAULT_CASE
         from orthosim_bench.backends import render_backends
 
-        record["render_backends"] = render_backends(case or DEFAULT_CASE, size, frames=max(30, frames // 2),
-                                                    warmup=min(warmup, 20), n_markers=markers)
+        record["render_backends"] = guarded("render_backends", failures, lambda: render_backends(
+            case or DEFAULT_CASE, size, frames=max(30, frames // 2), warmup=min(warmup, 20), n_markers=markers))
+    record["failures"] = as_records(failures)
     write_json(out_file, record)
     for line in summary_lines(record, out_file):
         click.echo(line)
+    for failure in failures:  # every sub-run that failed or was refused, named, and the bench fails
+        click.echo(failure.line(), err=True)
+    if failures:
+        raise SystemExit(1)

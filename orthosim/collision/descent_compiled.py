@@ -31,6 +31,9 @@ except ImportError:  # pragma: no cover - numba is optional
 AVAILABLE = njit is not None  # `descent.compiled_descent` chooses this walk when True (and asked to)
 
 if AVAILABLE:
+    from orthosim.system.firstrun import announce_compiles
+
+    announce_compiles()  # a kernel compiled (not loaded from numba's cache) says so on stderr
 
     @njit(cache=True, nogil=True)
     def _pack(flat, r, n, w, stride):

@@ -41,12 +41,16 @@ from numba import njit
 
 from orthosim.geometry.signeddistance import (STACK, MeshSurface, closest_face, distance_to_face, mesh_surface,
                                               signed_distances, surface_within)
+from orthosim.system.firstrun import announce_compiles
 
 DEPTH_TOLERANCE_MM = 0.01  # the surface depth is found to within this below the truth
 _BALL_STEPS = 24  # bisection steps of a ball's radius (root radius / 2**24: far below the tolerance)
 
 
 # --------------------------------------------------------------------------------- compiled
+
+
+announce_compiles()  # a kernel compiled here (not loaded from numba's cache) says so on stderr
 
 
 @njit(cache=True, nogil=True)

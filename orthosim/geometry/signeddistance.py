@@ -32,6 +32,8 @@ import numpy as np
 import trimesh
 from numba import njit
 
+from orthosim.system.firstrun import announce_compiles
+
 LEAF_FACES = 8  # faces in a leaf of the hierarchy
 # Nodes a depth-first descent of a hierarchy holds at once: one waiting sibling per level and the two
 # children just pushed. `build_hierarchy` halves a node's faces, so a mesh of n faces has at most
@@ -180,6 +182,9 @@ def _pseudonormals(V: np.ndarray, F: np.ndarray, face_edges: np.ndarray, n_edges
 
 
 # --------------------------------------------------------------------------------- compiled
+
+
+announce_compiles()  # a kernel compiled here (not loaded from numba's cache) says so on stderr
 
 
 @njit(cache=True, nogil=True)

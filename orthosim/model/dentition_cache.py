@@ -32,6 +32,7 @@ import numpy as np
 from orthosim.errors import DamagedFileError
 from orthosim.storage.cacheentry import ENTRY_FORMAT, DamagedEntryWarning, damaged, read_arrays, warn_damaged, write_arrays
 from orthosim.storage.sourcedigest import source_digest
+from orthosim.system.firstrun import preparing
 
 BUILDER_VERSION = 1
 ENTRY_KIND = "dentition"
@@ -221,7 +222,7 @@ def cached_dentition(parameters: Mapping, build: Callable[[], object], input_fil
         else:
             _replay(raised)
             return dent
-    with warnings.catch_warnings(record=True) as caught:
+    with warnings.catch_warnings(record=True) as caught, preparing("the teeth of this model"):
         warnings.simplefilter("always")
         built = build()
     raised = [(f"{w.category.__module__}.{w.category.__qualname__}", str(w.message)) for w in caught]

@@ -34,6 +34,7 @@ from orthosim.errors import DamagedFileError
 from orthosim.storage.atomic import atomic_path
 from orthosim.storage.cacheentry import (ENTRY_FORMAT, HEADER, DamagedEntryWarning, damaged, read_arrays, warn_damaged,
                                         write_arrays)
+from orthosim.system.firstrun import hush, preparing
 from orthosim.system.lifeline import exit_with_parent
 from orthosim.storage.sourcedigest import source_digest
 from orthosim.spheretree.build import DEPTH, build_sphere_tree, check_request, default_branching, mesh_arrays
@@ -230,6 +231,13 @@ def _build(args) -> SphereTree:
     return build_sphere_tree(mesh, method, branching, depth)
 
 
+def _worker_start(parent_pid: int) -> None:
+    """A tree-building worker: it ends with its parent if that is killed outright
+    (orthosim.system.lifeline), and leaves the "preparing" line to its parent (orthosim.system.firstrun)."""
+    exit_with_parent(parent_pid)
+    hush()
+
+
 def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int | None = None, depth: int = DEPTH,
                         cache_dir: str | Path | None = None, workers: int | None = None,
                         progress: Callable[[int], None] | None = None) -> list[SphereTree]:
@@ -269,14 +277,15 @@ def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int | 
         # fork: the children start at once with the parent's imports and compiled kernels
         # each worker ends with this process if it is killed outright (orthosim.system.lifeline)
         with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
-                                 initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
+                                 initializer=_worker_start, initargs=(os.getpid(),)) as pool:
             futures = {pool.submit(_build, job): e for job, e in zip(jobs, waiting)}
             for done in as_completed(futures):
                 yield futures[done], done.result()
 
-    for e, tree in built():
-        stored[e.path] = tree
-        _store(tree, e)
-        if progress is not None:
-            progress(users[e.path])
+    with preparing(f"the sphere trees of {len(waiting)} tooth shape{'s' if len(waiting) != 1 else ''}"):
+        for e, tree in built():
+            stored[e.path] = tree
+            _store(tree, e)
+            if progress is not None:
+                progress(users[e.path])
     return [mirror_tree(stored[e.path]) if e.flip else stored[e.path] for e in entries]

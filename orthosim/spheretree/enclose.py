@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from orthosim.system.firstrun import announce_compiles
+
 
 def node_vertex_groups(faces: np.ndarray, node_of_face: np.ndarray, n_nodes: int) -> np.ndarray:
     """Padded vertex indices of each node: (n_nodes, m) int64, rows padded by repeating an entry.
@@ -24,6 +26,9 @@ def node_vertex_groups(faces: np.ndarray, node_of_face: np.ndarray, n_nodes: int
         raise ValueError(f"node_of_face must lie in [0, {n_nodes})")  # the compiled gather does not check
     return _node_vertices(np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(node_of_face, dtype=np.int64),
                           int(n_nodes), n_vertices)
+
+
+announce_compiles()  # a kernel compiled here (not loaded from numba's cache) says so on stderr
 
 
 @njit(cache=True, nogil=True)

@@ -43,6 +43,7 @@ from orthosim.spheretree.enclose import enclosing_spheres, node_vertex_groups, r
 from orthosim.spheretree.measure import mesh_volume
 from orthosim.spheretree.outside_band import OutsideBand
 from orthosim.spheretree.tree import SphereTree
+from orthosim.system.firstrun import announce_compiles
 
 
 # The optimising builder's branching when none is asked: 9 (1, 9, 81 and up to 729 leaves at depth
@@ -115,6 +116,9 @@ def medial_radii(
         if not len(act):
             break
     return r
+
+
+announce_compiles()  # a kernel compiled here (not loaded from numba's cache) says so on stderr
 
 
 @njit(cache=True, nogil=True)

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from orthosim.system.firstrun import announce_compiles
+
 
 @dataclass(frozen=True, eq=False)
 class SphereTree:
@@ -80,6 +82,9 @@ class SphereTree:
                 raise ValueError(f"level {k}: {outside} faces not inside their covering sphere")
             if k:
                 node = self.parents[k][node]
+
+
+announce_compiles()  # a kernel compiled here (not loaded from numba's cache) says so on stderr
 
 
 @njit(cache=True, nogil=True)
