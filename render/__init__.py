@@ -7,7 +7,8 @@ when something first draws, in `offscreen_backend`, and only then is PYOPENGL_PL
   `pyrender_setup` (pyrender loaded with the fixes it needs headless), `scene` (the scene built once
   from a dentition, updated per frame), `renderer` and `lean_renderer` (the context and the draw
   loop), `cameras` (the five named views), `cej` (crown and root split at the CEJ for colouring),
-  `standin` (simple shapes for what has no mesh), `spheretree_view` (sphere trees drawn).
+  `standin` (simple shapes for what has no mesh), `spheretree_view` (sphere trees drawn),
+  `contact_faces` (exact contact faces per frame, each answer computed once while it holds).
 - Frames and video: `frame_state` (what one frame shows), `timeline` (frames from step records),
   `overlay` (case, day counter, legend, FDI labels), `animation` (frames, MP4, GIF, the run's
   drawing), `png` (fast PNG writing), `cputime` (CPU per frame of every thread and child).

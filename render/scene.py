@@ -137,7 +137,7 @@ class _ToothDrawable:
         # the order of `Tooth.crown_vertices`, for pictures coloured per crown vertex
         crown, _ = used_vertices(tooth.mesh.faces[tooth.face_part == CROWN], len(tooth.mesh.vertices))
         self.crown_blend = vertex_blend(crown, ends[:n_crown], t[:n_crown], pos[:n_crown], tooth.mesh.vertices)
-        self.contact_surface = None  # built on first use by exact contact faces
+        self.hits: np.ndarray | None = None  # drawn vertices painted in the contact colour now
         # bounding sphere in the local frame, to skip teeth far from every contact
         self.center_local = pos.mean(axis=0).astype(np.float64)
         self.radius_local = float(np.linalg.norm(pos - self.center_local, axis=1).max())
@@ -231,6 +231,7 @@ class DentitionScene:
         self._view: CameraView | None = None
         self._marker_arches = None
         self._extracted: frozenset[int] = frozenset()
+        self._exact_faces = None  # orthosim_render.contact_faces.ExactContactFaces, built on first use
         self.state: FrameState | None = None
         self.set_view("frontal")
 
@@ -351,26 +352,22 @@ class DentitionScene:
 
     def _exact_hits(self, state: FrameState, fdi: int, d: _ToothDrawable) -> np.ndarray | None:
         """Drawn vertices of the triangles of tooth `fdi` that touch a tooth it is in contact with."""
-        from orthosim.collision.contact_area import faces_in_spheres, faces_touching_any
-
         partners = [b if a == fdi else a for a, b in state.contact_pairs if fdi in (a, b)]
         partners = [p for p in partners if p in self.teeth and p not in state.extracted]
         if not partners:
             return None
-        candidates = faces_in_spheres(self._surface(fdi), self._pose(state, fdi), state.contact_centers, state.contact_radii)
-        faces = faces_touching_any(self._surface(fdi), self._pose(state, fdi), candidates,
-                                   [(self._surface(p), self._pose(state, p)) for p in partners])
-        rows = np.flatnonzero(np.isin(d.face_of_row, faces))  # a cut face is drawn as up to three
+        if self._exact_faces is None:
+            from orthosim_render.contact_faces import ExactContactFaces
+
+            self._exact_faces = ExactContactFaces(self.dentition)
+        faces = self._exact_faces.faces(fdi, self._pose(state, fdi), [(p, self._pose(state, p)) for p in partners],
+                                        state.contact_centers, state.contact_radii)
+        if not len(faces):
+            return None
+        named = np.zeros(len(self.dentition.teeth[fdi].mesh.faces), bool)
+        named[faces] = True
+        rows = np.flatnonzero(named[d.face_of_row])  # a cut face is drawn as up to three
         return np.unique(d.indices[rows]) if len(rows) else None
-
-    def _surface(self, fdi: int):
-        from orthosim.collision.contact_area import ContactSurface
-
-        d = self.teeth[fdi]
-        if d.contact_surface is None:
-            mesh = self.dentition.teeth[fdi].mesh
-            d.contact_surface = ContactSurface(mesh.vertices, mesh.faces)
-        return d.contact_surface
 
     def _paint_contact_faces(self, state: FrameState) -> None:
         """Colour the vertices of each tooth that lie inside a contact sphere (the paper's Figure 7),
@@ -393,6 +390,9 @@ class DentitionScene:
                         hits = np.unique(np.asarray(found, dtype=np.int64))
             if hits is None and not d.painted:
                 continue
+            if hits is not None and d.painted and np.array_equal(hits, d.hits):
+                continue  # painted as it should be: nothing to upload
+            d.hits = hits
             colors = d.base_colors.copy()
             if hits is not None:
                 colors[hits, :3] = CONTACT_COLOR
@@ -417,6 +417,7 @@ def paint_crowns(scene: DentitionScene, colors: dict[int, np.ndarray]) -> None:
             out[:len(d.crown_blend.a), :3] = d.crown_blend.apply(np.asarray(c, np.float32))
         d.primitive.color_0 = out
         d.painted = c is not None
+        d.hits = None  # painted by a figure, not by contacts
         scene.buffer_versions[d.primitive] = scene.buffer_versions.get(d.primitive, 0) + 1
 
 

@@ -94,6 +94,8 @@ class ContactSurface:
         self.centroids = tri.mean(axis=1)
         self.circumradius = np.linalg.norm(tri - self.centroids[:, None, :], axis=2).max(axis=1)  # about the centroid
         self.kdtree = cKDTree(self.centroids)
+        self.center = self.vertices.mean(axis=0)  # a sphere (center, radius mm) holding every vertex
+        self.radius = float(np.linalg.norm(self.vertices - self.center, axis=1).max())
         self._solid: Solid | None = None
 
     @property
@@ -112,19 +114,33 @@ class ContactSurface:
         to_other = np.linalg.inv(np.asarray(other_pose, float)) @ np.asarray(pose, float)
         tri = self.vertices[self.faces[candidates]] @ to_other[:3, :3].T + to_other[:3, 3]
         centre = tri.mean(axis=1)
-        reach = self.circumradius[candidates] + other.circumradius.max() + tolerance_mm
-        lists = other.kdtree.query_ball_point(centre, reach)
-        counts = np.fromiter((len(x) for x in lists), np.int64, len(lists))
+        mine, theirs = self._near_pairs(candidates, centre, other, tolerance_mm)
         keep = np.zeros(len(candidates), bool)
-        if counts.sum():
-            mine = np.repeat(np.arange(len(candidates)), counts)
-            theirs = np.concatenate([np.asarray(x, np.int64) for x in lists if len(x)])
+        if len(mine):
             d = triangle_distances(tri[mine], other.vertices[other.faces[theirs]])
             keep[np.unique(mine[d <= tolerance_mm])] = True
         rest = np.flatnonzero(~keep)
         if len(rest):
             keep[rest[other.solid.contains(centre[rest])]] = True
         return candidates[keep]
+
+    def _near_pairs(self, candidates: np.ndarray, centre: np.ndarray, other: "ContactSurface",
+                    tolerance_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        """(index into candidates, face of `other`) of every pair of triangles that may lie within
+        `tolerance_mm` of each other: centroids (`centre`, in `other`'s frame) no farther apart than
+        both circumradii and the tolerance, as every point of a triangle lies within its circumradius
+        of its centroid. The pairs left out cannot touch, so the kept faces are those of every pair."""
+        radius = self.circumradius[candidates]
+        lists = other.kdtree.query_ball_point(centre, radius + other.circumradius.max() + tolerance_mm)
+        counts = np.fromiter((len(x) for x in lists), np.int64, len(lists))
+        if not counts.sum():
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        mine = np.repeat(np.arange(len(candidates)), counts)
+        theirs = np.concatenate([np.asarray(x, np.int64) for x in lists if len(x)])
+        gap = centre[mine] - other.centroids[theirs]
+        reach = radius[mine] + other.circumradius[theirs] + tolerance_mm + 1e-9  # 1e-9 mm: rounding
+        near = np.einsum("ij,ij->i", gap, gap) <= reach * reach
+        return mine[near], theirs[near]
 
 
 def faces_touching_any(surface: ContactSurface, pose: np.ndarray, candidates: np.ndarray,
@@ -140,6 +156,10 @@ def faces_in_spheres(surface: ContactSurface, pose: np.ndarray, centers: np.ndar
     pose = np.asarray(pose, float)
     local = (np.asarray(centers, float).reshape(-1, 3) - pose[:3, 3]) @ pose[:3, :3]
     radii = np.asarray(radii, float).reshape(-1)
+    reach = radii + surface.radius + 1e-6  # a sphere that holds a face reaches the sphere holding the mesh
+    gap = local - surface.center
+    near = np.einsum("ij,ij->i", gap, gap) <= reach * reach
+    local, radii = local[near], radii[near]
     if not len(radii):
         return np.zeros(0, np.int64)
     lists = surface.kdtree.query_ball_point(local, radii)  # a face inside holds its centroid too
