@@ -36,7 +36,7 @@ def _probe(*args, tmp_path: Path) -> tuple[int, str, list[str]]:
     (["--help"], None),
     (["cases/case1_first_premolar_extraction.toml", "--view", "sideways"], "--view: sideways: is not a camera preset"),
     (["cases/case1_first_premolar_extraction.toml", "--fps", "500"], "--fps: 500: is not 1 to 120 frames per second"),
-    (["cases/case1_first_premolar_extraction.toml", "--detector", "nosuch"], "Invalid value for '--detector'"),
+    (["cases/case1_first_premolar_extraction.toml", "--detector", "nosuch"], "orthosim: error: --detector: 'nosuch' is not one of"),
     (["cases/no_such_case.toml"], "no_such_case.toml"),
     pytest.param(["cases/open_full_jaw_case3_diastema.toml", "--view", "sideways"], "--view: sideways: is not a camera preset",
                  marks=pytest.mark.real_data, id="real-teeth case, bad view"),
