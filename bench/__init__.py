@@ -8,5 +8,5 @@ prints), `collision` (detector timings), `spheretree` (tree build), `batch` (ani
 (launch to first step), `backends` (render frames/s through each offscreen OpenGL backend found),
 `closure` (the bite's closure against the rest of the step), `labels` (the label pass of semantic
 goldens), `rootaccuracy` (estimated roots against real ones), `scanarch` (a synthetic labelled arch
-scan made ready, cold and warm).
+scan made ready, cold and warm), `viewer` (the 3D page's bytes, load time and frame time in Chromium).
 """

@@ -275,8 +275,10 @@ def view_frames(dentition) -> dict[str, dict]:
 
     out = {}
     for name, (forward, up, arches) in PRESETS.items():
-        points = np.concatenate([dentition.teeth[n].to_world(dentition.teeth[n].mesh.vertices)
-                                 for n in dentition.fdis if arch_of(n) in arches])
+        shown = [n for n in dentition.fdis if arch_of(n) in arches]
+        if not shown:  # a one-arch scan has no occlusal view of the other arch
+            continue
+        points = np.concatenate([dentition.teeth[n].to_world(dentition.teeth[n].mesh.vertices) for n in shown])
         hull = points[ConvexHull(points).vertices] * MM
         out[name] = {"forward": list(forward), "up": list(up),
                      "arches": sorted("upper" if a is Arch.UPPER else "lower" for a in arches),
@@ -285,9 +287,10 @@ def view_frames(dentition) -> dict[str, dict]:
 
 
 def treatment_glb(dentition, keyframes: Sequence[SceneKeyframe], *, title: str, timeline: str = "day",
-                  shapes: Mapping[int, tuple] | None = None) -> bytes:
+                  shapes: Mapping[int, tuple] | None = None, labels: Sequence[str] | None = None) -> bytes:
     """The animated scene of `keyframes` (at least one) as GLB bytes (see the module doc).
-    timeline: what the page's slider counts, "day" (a run) or "stage" (a staging).
+    timeline: what the page's slider counts, "day" (a run), "stage" (a staging) or "pose" (named
+    poses, `labels`: one name per keyframe, a report's before and after).
     shapes: FDI -> (mesh, face_part) shown instead of the tooth model's (local frame, mm)."""
     shapes = shapes or {}
     if not keyframes:
@@ -308,5 +311,6 @@ def treatment_glb(dentition, keyframes: Sequence[SceneKeyframe], *, title: str, 
     builder.doc["scenes"][0]["extras"] = {"orthosim": {
         "format": SCENE_FORMAT, "title": title, "timeline": timeline, "step_seconds": STEP_SECONDS,
         "steps": [k.step for k in keyframes], "days": [round(k.day, 6) for k in keyframes],
-        "views": view_frames(dentition), "yfov": float(YFOV), "margin": MARGIN}}
+        "views": view_frames(dentition), "yfov": float(YFOV), "margin": MARGIN,
+        **({"labels": list(labels)} if labels is not None else {})}}
     return builder.glb()

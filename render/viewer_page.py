@@ -89,11 +89,11 @@ def viewer_html(glb: bytes, dentition, title: str, timeline: str = "day") -> str
 
 
 def write_viewer(out_dir: str | Path, dentition, keyframes: Sequence[SceneKeyframe], title: str,
-                 timeline: str = "day", shapes=None) -> dict[str, Path]:
+                 timeline: str = "day", shapes=None, labels: Sequence[str] | None = None) -> dict[str, Path]:
     """Write out_dir/animation.glb and out_dir/viewer.html (atomically); returns {"glb": path, "viewer": path}.
     shapes: FDI -> (mesh, face_part) shown instead of the tooth models (`treatment_glb`)."""
     out_dir = Path(out_dir)
-    glb = treatment_glb(dentition, keyframes, title=title, timeline=timeline, shapes=shapes)
+    glb = treatment_glb(dentition, keyframes, title=title, timeline=timeline, shapes=shapes, labels=labels)
     write_bytes(out_dir / GLB_NAME, glb)
     write_text(out_dir / PAGE_NAME, viewer_html(glb, dentition, title, timeline))
     return {"glb": out_dir / GLB_NAME, "viewer": out_dir / PAGE_NAME}
@@ -157,3 +157,13 @@ def write_staging_viewer(run, out_dir: str | Path) -> dict[str, Path]:
     """animation.glb (the stages as keyframes, the stage models' meshes) and viewer.html of a staging."""
     return write_viewer(out_dir, run.dentition, staging_keyframes(run), run.case.name,
                         timeline="stage", shapes=stage_shapes(run))
+
+
+# ------------------------------------------------------------------------------------------ a report
+def write_pose_viewer(data, out_dir: str | Path) -> dict[str, Path]:
+    """The poses of a report's contact figure (`orthosim_render.report.gather.CaseData`: before
+    treatment, then each detector's last pose) as keyframes, with their names on the slider."""
+    names = list(data.pose_names)
+    keyframes = [SceneKeyframe(k, float(k), data.poses[name], frozenset(data.extracted)) for k, name in enumerate(names)]
+    labels = ["before" if name == "initial" else f"after, {name} detector" for name in names]
+    return write_viewer(out_dir, data.dentition, keyframes, data.name, timeline="pose", labels=labels)
