@@ -5,7 +5,8 @@
 For each scene: the GLB's and the page's bytes (the page's own code apart), the seconds to write
 both, and in headless Chromium (WebGL2 through SwiftShader, the software GPU: a machine with a GPU
 is faster) the milliseconds from navigation to the first drawn frame and per frame afterwards
-(`viewer_check.open_viewer`, median of `loads` loads). Scenes: case 1 (the paper's, simulated in
+(`viewer_check.open_viewer`, median of `loads` loads, 640x480, antialiased), beside the baseline of
+the same run: orthosim's offscreen renderer (llvmpipe) drawing the same keyframes. Scenes: case 1 (the paper's, simulated in
 this process, every step a keyframe) and a labelled upper-arch scan of at least 300,000 triangles
 built as `scanarch.labelled_scan_timings` builds it (the smooth parametric crowns subdivided, the gum
 collar given rings), loaded as a `labelled-scan` model, with one incisor moved over 20 keyframes (the
@@ -25,6 +26,24 @@ from pathlib import Path
 import numpy as np
 
 
+def offscreen_frame_ms(dentition, keyframes, size=(640, 480)) -> float:
+    """The baseline measured in the same run: ms per frame of orthosim's offscreen renderer drawing
+    the same keyframes (frontal view, `size`), median, the first (set-up) frame left out."""
+    from orthosim_render.frame_state import FrameState
+    from orthosim_render.renderer import Renderer
+    from orthosim_render.scene import DentitionScene
+
+    scene = DentitionScene(dentition, size)
+    times = []
+    with Renderer(size) as renderer:
+        for k in list(keyframes)[:11]:
+            scene.update(FrameState(poses=k.poses, extracted=k.hidden, moving=k.moving))
+            started = time.perf_counter()
+            renderer.render(scene, "frontal")
+            times.append(1000 * (time.perf_counter() - started))
+    return statistics.median(times[1:])
+
+
 def _page_figures(out: Path, dentition, keyframes, title: str, loads: int) -> dict:
     from orthosim_render.viewer_check import open_viewer
     from orthosim_render.viewer_page import page_code_bytes, write_viewer
@@ -40,7 +59,7 @@ def _page_figures(out: Path, dentition, keyframes, title: str, loads: int) -> di
             "page_code_bytes": page_code_bytes(), "write_s": round(write_s, 3),
             "first_frame_ms": statistics.median(o.drawn_ms for o in opened if o.drawn_ms is not None) if not errors else None,
             "frame_ms": statistics.median(o.frame_ms for o in opened if o.frame_ms is not None) if not errors else None,
-            "errors": errors}
+            "offscreen_frame_ms": offscreen_frame_ms(dentition, keyframes), "errors": errors}
 
 
 def case_keyframes(case_path: Path):

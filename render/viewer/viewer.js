@@ -137,7 +137,7 @@
   }
 
   const canvas = document.getElementById("view");
-  const gl = canvas.getContext("webgl2", { antialias: !location.hash.startsWith("#test"), preserveDrawingBuffer: true });
+  const gl = canvas.getContext("webgl2", { antialias: !/(^#test|[#&]aa=0)/.test(location.hash), preserveDrawingBuffer: true });
   if (!gl) throw new Error("this browser has no WebGL2");
 
   function compile(vertexSource, fragmentSource) {
