@@ -241,12 +241,12 @@ def _add_tooth(builder, animation: _Animation, fdi: int, tooth, keyframes, mater
     return index
 
 
-def _add_contacts(builder, animation: _Animation, keyframes, material: int) -> list[int]:
+def _add_contacts(builder, animation: _Animation, keyframes, materials: _Materials) -> list[int]:
     """One marker node per pair that touches at some keyframe: there and scaled in where it touches."""
     pairs = sorted({m.pair for k in keyframes for m in k.contacts})
     if not pairs:
         return []
-    mesh = _marker_mesh(builder, material)
+    mesh = _marker_mesh(builder, materials["contact"])
     nodes = []
     for pair in pairs:
         where = [next((m.center_mm for m in k.contacts if m.pair == pair), None) for k in keyframes]
@@ -355,7 +355,7 @@ def treatment_glb(dentition, keyframes: Sequence[SceneKeyframe], *, title: str, 
         mesh = _gum_mesh(builder, name, gum, materials["gingiva"])
         roots.append(builder.add("nodes", {"name": f"gingiva_{name}", "mesh": mesh,
                                            "extras": {"role": "gingiva", "arch": name}}))
-    roots += _add_contacts(builder, animation, keyframes, materials["contact"])
+    roots += _add_contacts(builder, animation, keyframes, materials)
     animation.finish()
     builder.doc["scenes"][0]["nodes"] = roots
     builder.doc["scenes"][0]["extras"] = {"orthosim": {
