@@ -25,8 +25,8 @@ from orthosim.storage.atomic import write_bytes, write_text
 
 from orthosim_render.cameras import VIEW_NAMES
 from orthosim_render.scene import (AMBIENT, BACKGROUND, CONTACT_COLOR, CROWN_COLOR, ESTIMATED_ROOT_COLOR,
-                                   GINGIVA_COLOR, LIGHT_RIG, MOVING_TINT, ROOT_COLOR)
-from orthosim_render.treatment_gltf import ContactLocator, SceneKeyframe, keyframe_of_record, treatment_glb
+                                   GINGIVA_COLOR, LIGHT_RIG, MOVING_TINT, OCCLUSAL_MARGIN, ROOT_COLOR)
+from orthosim_render.treatment_gltf import MM, ContactLocator, SceneKeyframe, keyframe_of_record, treatment_glb
 
 ASSETS = Path(__file__).with_name("viewer")
 SHADER_FILES = ("tooth.vert", "tooth.frag", "id.vert", "id.frag")
@@ -80,7 +80,7 @@ def viewer_html(glb: bytes, dentition, title: str, timeline: str = "day") -> str
     template, script, shaders = _assets()
     config = {"background": list(BACKGROUND), "ambient": list(AMBIENT),
               "light_rig": [[list(d), list(c), k] for d, c, k in LIGHT_RIG],
-              "names": {str(n): F.name(n) for n in dentition.fdis}}
+              "names": {str(n): F.name(n) for n in dentition.fdis}, "occlusal_margin": OCCLUSAL_MARGIN * MM}
     page = Environment(autoescape=True).from_string(template)
     return page.render(title=title, timeline=timeline, background_css=_css(BACKGROUND), legend=legend(dentition),
                        views=[(v, VIEW_CAPTIONS.get(v, v)) for v in VIEW_NAMES],

@@ -265,6 +265,15 @@
     return true;
   }
 
+  // as render/scene.py does in an occlusal view of one arch: a contact between teeth of the hidden
+  // arch would float over the shown one; keep the markers on the shown arch's side of the occlusal
+  // plane (y = 0), with the frames' margin for the contacts between the arches
+  function markerOnShownSide(y) {
+    const arches = state.camera.arches;
+    if (state.opposing || arches.length !== 1) return true;
+    return arches[0] === "upper" ? y > -CONFIG.occlusal_margin : y < CONFIG.occlusal_margin;
+  }
+
   function cameraMatrices(camera, aspect) {
     const eye = add(camera.target, scale(camera.z, camera.distance));
     const { x, y, z } = camera;
@@ -279,6 +288,7 @@
       if (n.mesh === undefined || !visible(i)) return;
       const m = world[i];
       if (m[0] === 0 && m[1] === 0 && m[2] === 0) return;  // scaled out: not there at this keyframe
+      if (n.role === "contact" && !markerOnShownSide(m[13])) return;
       for (const p of meshes[n.mesh]) {
         if (p.part === "root" && !state.roots) continue;
         (p.material.blend ? blended : opaque).push({ node: i, p, m });
