@@ -9,5 +9,5 @@ prints), `collision` (detector timings), `spheretree` (tree build), `batch` (ani
 `closure` (the bite's closure against the rest of the step), `labels` (the label pass of semantic
 goldens), `rootaccuracy` (estimated roots against real ones), `scanarch` (a synthetic labelled arch
 scan made ready, cold and warm), `subruns` (a failed or refused sub-run: its figure null, a line
-naming it, the bench's exit status 1).
+naming it, the bench's exit status 1), `viewer` (the 3D page's bytes, load time and frame time in Chromium).
 """

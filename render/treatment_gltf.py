@@ -41,6 +41,7 @@ STEP_SECONDS = 0.25  # animation seconds per keyframe in other glTF players (the
 CONTACT_MARKER_RADIUS_MM = 1.0  # one marker per touching pair: a sphere this size at the contact centre (shows past the teeth)
 SCENE_FORMAT = "orthosim-scene/1"
 MAX_GLB_BYTES = 30_000_000  # a scene over this is simplified (issue 41: the page must stay interactive)
+VIEW_TOLERANCE_MM = 0.3  # the most a tooth's surface may move when a scene is simplified to fit MAX_GLB_BYTES
 NEAR_MM = 3.0  # a contact sphere farther than this from a tooth is not that tooth's contact
 
 
@@ -240,12 +241,12 @@ def _add_tooth(builder, animation: _Animation, fdi: int, tooth, keyframes, mater
     return index
 
 
-def _add_contacts(builder, animation: _Animation, keyframes, material: int) -> list[int]:
+def _add_contacts(builder, animation: _Animation, keyframes, materials: _Materials) -> list[int]:
     """One marker node per pair that touches at some keyframe: there and scaled in where it touches."""
     pairs = sorted({m.pair for k in keyframes for m in k.contacts})
     if not pairs:
         return []
-    mesh = _marker_mesh(builder, material)
+    mesh = _marker_mesh(builder, materials["contact"])
     nodes = []
     for pair in pairs:
         where = [next((m.center_mm for m in k.contacts if m.pair == pair), None) for k in keyframes]
@@ -275,8 +276,10 @@ def view_frames(dentition) -> dict[str, dict]:
 
     out = {}
     for name, (forward, up, arches) in PRESETS.items():
-        points = np.concatenate([dentition.teeth[n].to_world(dentition.teeth[n].mesh.vertices)
-                                 for n in dentition.fdis if arch_of(n) in arches])
+        shown = [n for n in dentition.fdis if arch_of(n) in arches]
+        if not shown:  # a one-arch scan has no occlusal view of the other arch
+            continue
+        points = np.concatenate([dentition.teeth[n].to_world(dentition.teeth[n].mesh.vertices) for n in shown])
         hull = points[ConvexHull(points).vertices] * MM
         out[name] = {"forward": list(forward), "up": list(up),
                      "arches": sorted("upper" if a is Arch.UPPER else "lower" for a in arches),
@@ -284,29 +287,80 @@ def view_frames(dentition) -> dict[str, dict]:
     return out
 
 
+def _mesh_bytes(vertices: int, faces: int) -> int:
+    """GLB bytes of one mesh as written: float32 positions and normals, 16- or 32-bit indices."""
+    return 24 * vertices + faces * 3 * (2 if vertices < 65536 else 4)
+
+
+def fitted_shapes(dentition, keyframes: Sequence[SceneKeyframe], shapes: Mapping[int, tuple],
+                  max_bytes: int) -> dict[int, tuple]:
+    """The tooth shapes to write: the models' own, unless the scene would pass `max_bytes`; then every
+    tooth is simplified (`_simplified`) to the share of triangles that fits, its faces' crown/root
+    parts taken again from the CEJ plane. The gum and the keyframes are not simplified; they are counted."""
+    from orthosim.model.tooth import part_of_faces
+
+    own = {n: shapes.get(n, (dentition.teeth[n].mesh, dentition.teeth[n].face_part)) for n in dentition.fdis}
+    teeth = sum(_mesh_bytes(len(m.vertices), len(m.faces)) for m, _ in own.values())
+    fixed = sum(_mesh_bytes(len(g.vertices), len(g.faces)) for g in dentition.gingiva.values())
+    fixed += len(keyframes) * len(own) * 40 + 200_000  # keyframe samplers, the JSON, markers
+    if teeth + fixed <= max_bytes:
+        return own
+    share = max(0.05, (max_bytes - fixed) / teeth)
+    out = {}
+    for n, (mesh, _) in own.items():
+        smaller = _simplified(mesh, max(200, int(len(mesh.faces) * share)))
+        out[n] = (smaller, part_of_faces(smaller))
+    return out
+
+
+def _simplified(mesh, max_triangles: int):
+    """`mesh` (mm) with at most about `max_triangles` triangles: manifold3d's edge collapse (the surface
+    kept within a tolerance, closed kept), the tolerance doubled from 0.01 mm until it fits, up to
+    VIEW_TOLERANCE_MM (a picture's, not a simulation's: `meshload.simplify_to_budget` stops at 0.02 mm);
+    a mesh manifold3d cannot take (not closed) is kept as it is."""
+    import manifold3d
+    import trimesh
+
+    solid = manifold3d.Manifold(manifold3d.Mesh(vert_properties=np.asarray(mesh.vertices, np.float32),
+                                                tri_verts=np.asarray(mesh.faces, np.uint32)))
+    if solid.status() != manifold3d.Error.NoError:
+        return mesh
+    tolerance = 0.01
+    smaller = solid.simplify(tolerance)
+    while smaller.num_tri() > max_triangles and tolerance < VIEW_TOLERANCE_MM:
+        tolerance *= 2
+        smaller = solid.simplify(tolerance)
+    out = smaller.to_mesh()
+    return trimesh.Trimesh(np.asarray(out.vert_properties)[:, :3], np.asarray(out.tri_verts), process=False)
+
+
 def treatment_glb(dentition, keyframes: Sequence[SceneKeyframe], *, title: str, timeline: str = "day",
-                  shapes: Mapping[int, tuple] | None = None) -> bytes:
+                  shapes: Mapping[int, tuple] | None = None, labels: Sequence[str] | None = None,
+                  max_bytes: int = MAX_GLB_BYTES) -> bytes:
     """The animated scene of `keyframes` (at least one) as GLB bytes (see the module doc).
-    timeline: what the page's slider counts, "day" (a run) or "stage" (a staging).
-    shapes: FDI -> (mesh, face_part) shown instead of the tooth model's (local frame, mm)."""
-    shapes = shapes or {}
+    timeline: what the page's slider counts, "day" (a run), "stage" (a staging) or "pose" (named
+    poses, `labels`: one name per keyframe, a report's before and after).
+    shapes: FDI -> (mesh, face_part) shown instead of the tooth model's (local frame, mm).
+    max_bytes: a scene that would be larger gets simplified teeth (`fitted_shapes`)."""
+    shapes = fitted_shapes(dentition, keyframes, shapes or {}, max_bytes)
     if not keyframes:
         raise ValueError("a treatment scene needs at least one keyframe")
     builder = GltfBuilder()
     builder.doc["asset"]["extras"] = {"title": title}
     materials = _Materials(builder)
     animation = _Animation(builder, len(keyframes))
-    roots = [_add_tooth(builder, animation, n, dentition.teeth[n], keyframes, materials, shapes.get(n))
+    roots = [_add_tooth(builder, animation, n, dentition.teeth[n], keyframes, materials, shapes[n])
              for n in dentition.fdis]
     for name, gum in sorted(dentition.gingiva.items()):
         mesh = _gum_mesh(builder, name, gum, materials["gingiva"])
         roots.append(builder.add("nodes", {"name": f"gingiva_{name}", "mesh": mesh,
                                            "extras": {"role": "gingiva", "arch": name}}))
-    roots += _add_contacts(builder, animation, keyframes, materials["contact"])
+    roots += _add_contacts(builder, animation, keyframes, materials)
     animation.finish()
     builder.doc["scenes"][0]["nodes"] = roots
     builder.doc["scenes"][0]["extras"] = {"orthosim": {
         "format": SCENE_FORMAT, "title": title, "timeline": timeline, "step_seconds": STEP_SECONDS,
         "steps": [k.step for k in keyframes], "days": [round(k.day, 6) for k in keyframes],
-        "views": view_frames(dentition), "yfov": float(YFOV), "margin": MARGIN}}
+        "views": view_frames(dentition), "yfov": float(YFOV), "margin": MARGIN,
+        **({"labels": list(labels)} if labels is not None else {})}}
     return builder.glb()

@@ -18,7 +18,8 @@ import numpy as np
 
 WEBGL_FLAGS = ("--use-angle=swiftshader", "--enable-unsafe-swiftshader")
 _PROBE = "JSON.stringify({test: document.documentElement.dataset.viewerTest || null, " \
-         "drawn: document.documentElement.dataset.drawn || null, errors: document.documentElement.dataset.errors || null})"
+         "drawn: document.documentElement.dataset.drawn || null, errors: document.documentElement.dataset.errors || null, " \
+         "frame_ms: FRAMES && window.orthosimViewer ? window.orthosimViewer.frameMs(FRAMES) : null})"
 
 
 @dataclass(frozen=True)
@@ -40,20 +41,22 @@ class ViewerLoad:
     errors: list[str] = field(default_factory=list)
     drawn_ms: float | None = None  # ms from navigation to the first drawn frame
     screenshot_png: bytes = b""
+    frame_ms: float | None = None  # ms to draw one frame, over `measure_frames` frames (asked for)
 
 
 def open_viewer(page: str | Path, *, step: int | None = None, view: str = "frontal", size: tuple[int, int] = (320, 240),
                 test: bool = True, screenshot: bool = False, window: tuple[int, int] = (640, 480),
-                timeout_s: float = 120.0) -> ViewerLoad:
+                timeout_s: float = 120.0, measure_frames: int = 0) -> ViewerLoad:
     """Open `page` in headless Chromium at keyframe `step` and `view` (test mode: the id picture at
-    `size`); `screenshot`: also the page as a reader sees it at `window`, its panels hidden."""
+    `size`); `screenshot`: also the page as a reader sees it at `window`, its panels hidden;
+    `measure_frames`: draw that many frames after loading and time them."""
     from orthosim_render.report.browser import load_page
 
     parts = (["test", f"w={size[0]}", f"h={size[1]}"] if test else []) + [f"view={view}"]
     parts += [f"step={step}"] if step is not None else []
     parts += ["bare=1"] if screenshot else []
     loaded = load_page(page, screenshot=screenshot, window=window, timeout_s=timeout_s, fragment="&".join(parts),
-                       extra_flags=WEBGL_FLAGS, evaluate=_PROBE)
+                       extra_flags=WEBGL_FLAGS, evaluate=_PROBE.replace("FRAMES", str(int(measure_frames))))
     probe = json.loads(loaded.value or "{}")
     errors = list(loaded.problems) + (json.loads(probe["errors"]) if probe.get("errors") else [])
     picture = None
@@ -62,7 +65,7 @@ def open_viewer(page: str | Path, *, step: int | None = None, view: str = "front
         picture = ToothPicture({int(k): (int(v["pixels"]), tuple(v["centroid"])) for k, v in data["teeth"].items()},
                                tuple(data["size"]))
     drawn = float(probe["drawn"]) if probe.get("drawn") else None
-    return ViewerLoad(picture, errors, drawn, loaded.screenshot_png)
+    return ViewerLoad(picture, errors, drawn, loaded.screenshot_png, probe.get("frame_ms"))
 
 
 def label_picture(dentition, state, view: str, size: tuple[int, int] = (320, 240)) -> ToothPicture:

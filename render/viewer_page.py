@@ -25,8 +25,8 @@ from orthosim.storage.atomic import write_bytes, write_text
 
 from orthosim_render.cameras import VIEW_NAMES
 from orthosim_render.scene import (AMBIENT, BACKGROUND, CONTACT_COLOR, CROWN_COLOR, ESTIMATED_ROOT_COLOR,
-                                   GINGIVA_COLOR, LIGHT_RIG, MOVING_TINT, ROOT_COLOR)
-from orthosim_render.treatment_gltf import ContactLocator, SceneKeyframe, keyframe_of_record, treatment_glb
+                                   GINGIVA_COLOR, LIGHT_RIG, MOVING_TINT, OCCLUSAL_MARGIN, ROOT_COLOR)
+from orthosim_render.treatment_gltf import MM, ContactLocator, SceneKeyframe, keyframe_of_record, treatment_glb
 
 ASSETS = Path(__file__).with_name("viewer")
 SHADER_FILES = ("tooth.vert", "tooth.frag", "id.vert", "id.frag")
@@ -80,7 +80,7 @@ def viewer_html(glb: bytes, dentition, title: str, timeline: str = "day") -> str
     template, script, shaders = _assets()
     config = {"background": list(BACKGROUND), "ambient": list(AMBIENT),
               "light_rig": [[list(d), list(c), k] for d, c, k in LIGHT_RIG],
-              "names": {str(n): F.name(n) for n in dentition.fdis}}
+              "names": {str(n): F.name(n) for n in dentition.fdis}, "occlusal_margin": OCCLUSAL_MARGIN * MM}
     page = Environment(autoescape=True).from_string(template)
     return page.render(title=title, timeline=timeline, background_css=_css(BACKGROUND), legend=legend(dentition),
                        views=[(v, VIEW_CAPTIONS.get(v, v)) for v in VIEW_NAMES],
@@ -89,11 +89,11 @@ def viewer_html(glb: bytes, dentition, title: str, timeline: str = "day") -> str
 
 
 def write_viewer(out_dir: str | Path, dentition, keyframes: Sequence[SceneKeyframe], title: str,
-                 timeline: str = "day", shapes=None) -> dict[str, Path]:
+                 timeline: str = "day", shapes=None, labels: Sequence[str] | None = None) -> dict[str, Path]:
     """Write out_dir/animation.glb and out_dir/viewer.html (atomically); returns {"glb": path, "viewer": path}.
     shapes: FDI -> (mesh, face_part) shown instead of the tooth models (`treatment_glb`)."""
     out_dir = Path(out_dir)
-    glb = treatment_glb(dentition, keyframes, title=title, timeline=timeline, shapes=shapes)
+    glb = treatment_glb(dentition, keyframes, title=title, timeline=timeline, shapes=shapes, labels=labels)
     write_bytes(out_dir / GLB_NAME, glb)
     write_text(out_dir / PAGE_NAME, viewer_html(glb, dentition, title, timeline))
     return {"glb": out_dir / GLB_NAME, "viewer": out_dir / PAGE_NAME}
@@ -157,3 +157,13 @@ def write_staging_viewer(run, out_dir: str | Path) -> dict[str, Path]:
     """animation.glb (the stages as keyframes, the stage models' meshes) and viewer.html of a staging."""
     return write_viewer(out_dir, run.dentition, staging_keyframes(run), run.case.name,
                         timeline="stage", shapes=stage_shapes(run))
+
+
+# ------------------------------------------------------------------------------------------ a report
+def write_pose_viewer(data, out_dir: str | Path) -> dict[str, Path]:
+    """The poses of a report's contact figure (`orthosim_render.report.gather.CaseData`: before
+    treatment, then each detector's last pose) as keyframes, with their names on the slider."""
+    names = list(data.pose_names)
+    keyframes = [SceneKeyframe(k, float(k), data.poses[name], frozenset(data.extracted)) for k, name in enumerate(names)]
+    labels = ["before" if name == "initial" else f"after, {name} detector" for name in names]
+    return write_viewer(out_dir, data.dentition, keyframes, data.name, timeline="pose", labels=labels)

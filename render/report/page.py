@@ -133,6 +133,7 @@ def build_report(runs: Sequence[RunData | str | Path], out_dir: str | Path, *, p
             images = _prefixed(images, "img/")
             record = case_record(data, images)
             record["anchor"] = slug
+            record["viewer"] = _case_viewer(data, out_dir, slug)
             cases.append(record)
     report = {
         "orthosim_version": __version__,
@@ -151,6 +152,14 @@ def build_report(runs: Sequence[RunData | str | Path], out_dir: str | Path, *, p
         print_pdf(out_dir / "index.html", out_dir / "report.pdf")
     report["build_s"] = time.perf_counter() - started
     return report
+
+
+def _case_viewer(data: CaseData, out_dir: Path, slug: str) -> str:
+    """scenes/<slug>/viewer.html (and animation.glb): the contact figure's poses in 3D; its path in the report."""
+    from orthosim_render.viewer_page import write_pose_viewer
+
+    page = write_pose_viewer(data, out_dir / "scenes" / slug)["viewer"]
+    return page.relative_to(out_dir).as_posix()
 
 
 def _prefixed(images, prefix: str):

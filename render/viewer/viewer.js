@@ -137,7 +137,7 @@
   }
 
   const canvas = document.getElementById("view");
-  const gl = canvas.getContext("webgl2", { antialias: !location.hash.startsWith("#test"), preserveDrawingBuffer: true });
+  const gl = canvas.getContext("webgl2", { antialias: !/(^#test|[#&]aa=0)/.test(location.hash), preserveDrawingBuffer: true });
   if (!gl) throw new Error("this browser has no WebGL2");
 
   function compile(vertexSource, fragmentSource) {
@@ -265,6 +265,15 @@
     return true;
   }
 
+  // as render/scene.py does in an occlusal view of one arch: a contact between teeth of the hidden
+  // arch would float over the shown one; keep the markers on the shown arch's side of the occlusal
+  // plane (y = 0), with the frames' margin for the contacts between the arches
+  function markerOnShownSide(y) {
+    const arches = state.camera.arches;
+    if (state.opposing || arches.length !== 1) return true;
+    return arches[0] === "upper" ? y > -CONFIG.occlusal_margin : y < CONFIG.occlusal_margin;
+  }
+
   function cameraMatrices(camera, aspect) {
     const eye = add(camera.target, scale(camera.z, camera.distance));
     const { x, y, z } = camera;
@@ -279,6 +288,7 @@
       if (n.mesh === undefined || !visible(i)) return;
       const m = world[i];
       if (m[0] === 0 && m[1] === 0 && m[2] === 0) return;  // scaled out: not there at this keyframe
+      if (n.role === "contact" && !markerOnShownSide(m[13])) return;
       for (const p of meshes[n.mesh]) {
         if (p.part === "root" && !state.roots) continue;
         (p.material.blend ? blended : opaque).push({ node: i, p, m });
@@ -392,7 +402,8 @@
     draw({ framebuffer: null, width: canvas.width, height: canvas.height, ids: false });
     const k = Math.round(state.position);
     const label = document.getElementById("day");
-    if (label) label.textContent = extras.timeline === "stage" ? `stage ${steps[k]} of ${steps[steps.length - 1]}`
+    if (label) label.textContent = extras.labels ? extras.labels[k]
+      : extras.timeline === "stage" ? `stage ${steps[k]} of ${steps[steps.length - 1]}`
       : `day ${Math.round(days[k])} of ${Math.round(days[days.length - 1])} (step ${steps[k]})`;
   }
 
@@ -404,9 +415,10 @@
   }
 
   function wireControls() {
-    for (const name of Object.keys(extras.views)) {
-      const b = document.querySelector(`button[data-view="${name}"]`);
-      if (b) b.addEventListener("click", () => { setView(name, canvas.width / canvas.height); redraw(); });
+    for (const b of document.querySelectorAll("button[data-view]")) {
+      const name = b.dataset.view;
+      if (!extras.views[name]) { b.hidden = true; continue; }  // an arch the model lacks
+      b.addEventListener("click", () => { setView(name, canvas.width / canvas.height); redraw(); });
     }
     const slider = document.getElementById("slider");
     slider.max = steps.length - 1;
@@ -495,7 +507,7 @@
 
   function start() {
     fit();
-    const named = params.get("view") || "frontal";
+    const named = params.get("view") || (extras.views.frontal ? "frontal" : Object.keys(extras.views)[0]);
     if (!extras.views[named]) throw new Error(`unknown view ${named}`);
     if (params.has("test")) {
       const w = Number(params.get("w") || 320), h = Number(params.get("h") || 240);
@@ -516,6 +528,16 @@
     document.getElementById("slider").value = state.position;
     paint();
     document.documentElement.dataset.drawn = String(performance.now());
+    // for the bench: milliseconds to draw one whole frame (the GPU's work included), over n frames
+    window.orthosimViewer = { frameMs(n) {
+      const pixel = new Uint8Array(4), started = performance.now();
+      for (let i = 0; i < n; i++) {
+        state.position = i % steps.length;
+        paint();
+        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);  // waits for the frame to finish
+      }
+      return (performance.now() - started) / n;
+    } };
     document.title = document.title.replace(/ \(loading\)$/, "");
   }
 

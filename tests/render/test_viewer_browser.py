@@ -104,3 +104,29 @@ def test_the_pages_open_offline_and_the_staging_page_embeds_its_viewer(case3, cr
     index = load_page(crowding[0] / "index.html", extra_flags=WEBGL_FLAGS, screenshot=False)
     assert index.problems == [] and index.network_requests == []
     assert '<iframe src="viewer.html"' in (crowding[0] / "index.html").read_text()
+
+
+def test_pointing_at_a_tooth_names_it_and_the_view_buttons_frame_the_presets(case3):
+    """Hover: the tooltip names the tooth under the pointer (its FDI number and name); a view button
+    frames that preset (the maxillary occlusal view hides the opposing arch, as the frames do)."""
+    from orthosim_render.report.browser import load_page
+    from orthosim_render.viewer_check import WEBGL_FLAGS
+
+    probe = """(() => {
+      const t = JSON.parse(document.documentElement.dataset.viewerTest).teeth["11"].centroid;
+      const canvas = document.getElementById("view"), r = canvas.getBoundingClientRect();
+      canvas.dispatchEvent(new PointerEvent("pointermove", {clientX: r.left + t[0] + 0.5, clientY: r.top + t[1] + 0.5}));
+      const tip = document.getElementById("tooltip");
+      const named = tip.hidden ? "" : tip.textContent;
+      document.querySelector('button[data-view="maxillary_occlusal"]').click();
+      return JSON.stringify({named, size: [r.width, r.height], opposing: document.getElementById("toggle-opposing").checked});
+    })()"""
+    page = load_page(case3[0] / "viewer.html", fragment="test&w=640&h=480&view=frontal&step=0", window=(640, 480 + 87),
+                     extra_flags=WEBGL_FLAGS, screenshot=False, evaluate=probe)
+    assert page.problems == []
+    import json
+
+    result = json.loads(page.value)
+    assert result["size"] == [640, 480]  # the id picture was drawn at the canvas's own size
+    assert result["named"] == "11: upper right central incisor"
+    assert result["opposing"] is False

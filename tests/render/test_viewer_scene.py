@@ -266,3 +266,19 @@ def test_export_scene_glb_is_in_metres_with_each_tooth_at_its_pose(dentition, tm
     posed = scene.geometry["tooth_13"].copy().apply_transform(scene.graph.get("tooth_13")[0]).vertices
     want = dentition.teeth[13].to_world(dentition.teeth[13].mesh.vertices, poses[13]) * MM
     assert np.abs(posed - want).max() < 1e-9
+
+
+@pytest.mark.slow  # 28 teeth simplified
+def test_a_scene_over_the_size_limit_gets_simplified_teeth_that_fit_it(dentition, keyframes):
+    """The models' own meshes while the scene fits; above the limit every tooth is simplified so that
+    the GLB fits, its crown and root kept apart (here a limit of a third of the scene)."""
+    whole = treatment_glb(dentition, keyframes, title="t")
+    limit = len(whole) // 3
+    data = treatment_glb(dentition, keyframes, title="t", max_bytes=limit)
+    assert len(data) <= limit
+    small = read_glb(data)
+    _, node = _node(small, "tooth_16_still")
+    mesh = small.doc["meshes"][node["mesh"]]
+    faces = sum(small.doc["accessors"][p["indices"]]["count"] // 3 for p in mesh["primitives"])
+    assert faces < len(dentition.teeth[16].mesh.faces) / 2
+    assert {p["extras"]["part"] for p in mesh["primitives"]} == {"crown", "root"}
