@@ -213,19 +213,29 @@ def _shown(flags: np.ndarray) -> np.ndarray:
     return np.repeat(flags.astype(np.float32)[:, None], 3, axis=1)
 
 
-def _add_tooth(builder, animation: _Animation, fdi: int, tooth, keyframes, materials, shape=None) -> int:
-    """The tooth's node (pose keyframes; scaled out where hidden) and its still and moving children."""
-    still_mesh, moving_mesh = _tooth_meshes(builder, fdi, tooth, materials, shape)
+def _add_tooth(builder, animation: _Animation, fdi: int, tooth, keyframes, materials, shape=None,
+               changed: tuple[int, tuple] | None = None) -> int:
+    """The tooth's node (pose keyframes; scaled out where hidden) and its still and moving children.
+    changed: (keyframe k, shape): from keyframe k on the tooth shows `shape` instead (a staging's tooth
+    after its interproximal reduction), as a second pair of children scaled in from k."""
     poses = np.stack([np.asarray(k.poses.get(fdi, tooth.rest_pose), float) for k in keyframes])
     translation = poses[:, :3, 3] * MM
     rotation = quaternion_xyzw(poses[:, :3, :3])
     present = np.array([fdi not in k.hidden for k in keyframes])
     moving = np.array([fdi in k.moving for k in keyframes]) & present
-    still = builder.add("nodes", {"name": f"tooth_{fdi}_still", "mesh": still_mesh, "extras": {"role": "still"},
-                                  **({} if not moving[0] else {"scale": [0.0, 0.0, 0.0]})})
-    tinted = builder.add("nodes", {"name": f"tooth_{fdi}_moving", "mesh": moving_mesh, "extras": {"role": "moving"},
-                                   **({} if moving[0] else {"scale": [0.0, 0.0, 0.0]})})
-    node = {"name": f"tooth_{fdi}", "children": [still, tinted], "translation": [float(v) for v in translation[0]],
+    after = np.arange(len(keyframes)) >= (changed[0] if changed else len(keyframes))
+    children = []
+    for span, form in ((~after, shape), (after, changed[1] if changed else None)):
+        if not span.any():
+            continue
+        still_mesh, moving_mesh = _tooth_meshes(builder, fdi, tooth, materials, form)
+        for role, mesh, shown in (("still", still_mesh, ~moving & span), ("moving", moving_mesh, moving & span)):
+            node = builder.add("nodes", {"name": f"tooth_{fdi}_{role}", "mesh": mesh, "extras": {"role": role},
+                                         **({} if shown[0] else {"scale": [0.0, 0.0, 0.0]})})
+            children.append(node)
+            if shown.any() and not shown.all():
+                animation.channel(node, "scale", _shown(shown), "STEP")
+    node = {"name": f"tooth_{fdi}", "children": children, "translation": [float(v) for v in translation[0]],
             "rotation": [float(v) for v in rotation[0]],
             "extras": {"fdi": fdi, "arch": "upper" if arch_of(fdi) is Arch.UPPER else "lower"}}
     if not present[0]:
@@ -235,9 +245,6 @@ def _add_tooth(builder, animation: _Animation, fdi: int, tooth, keyframes, mater
     animation.channel(index, "rotation", rotation, "LINEAR")
     if not present.all():
         animation.channel(index, "scale", _shown(present), "STEP")
-    if moving.any():
-        animation.channel(still, "scale", _shown(~moving), "STEP")
-        animation.channel(tinted, "scale", _shown(moving), "STEP")
     return index
 
 
@@ -336,11 +343,13 @@ def _simplified(mesh, max_triangles: int):
 
 def treatment_glb(dentition, keyframes: Sequence[SceneKeyframe], *, title: str, timeline: str = "day",
                   shapes: Mapping[int, tuple] | None = None, labels: Sequence[str] | None = None,
-                  max_bytes: int = MAX_GLB_BYTES) -> bytes:
+                  changed: Mapping[int, tuple[int, tuple]] | None = None, max_bytes: int = MAX_GLB_BYTES) -> bytes:
     """The animated scene of `keyframes` (at least one) as GLB bytes (see the module doc).
     timeline: what the page's slider counts, "day" (a run), "stage" (a staging) or "pose" (named
     poses, `labels`: one name per keyframe, a report's before and after).
     shapes: FDI -> (mesh, face_part) shown instead of the tooth model's (local frame, mm).
+    changed: FDI -> (keyframe k, (mesh, face_part)): the tooth's shape from keyframe k on (a staging's
+    interproximal reduction); not simplified.
     max_bytes: a scene that would be larger gets simplified teeth (`fitted_shapes`)."""
     shapes = fitted_shapes(dentition, keyframes, shapes or {}, max_bytes)
     if not keyframes:
@@ -349,8 +358,8 @@ def treatment_glb(dentition, keyframes: Sequence[SceneKeyframe], *, title: str, 
     builder.doc["asset"]["extras"] = {"title": title}
     materials = _Materials(builder)
     animation = _Animation(builder, len(keyframes))
-    roots = [_add_tooth(builder, animation, n, dentition.teeth[n], keyframes, materials, shapes[n])
-             for n in dentition.fdis]
+    roots = [_add_tooth(builder, animation, n, dentition.teeth[n], keyframes, materials, shapes[n],
+                        (changed or {}).get(n)) for n in dentition.fdis]
     for name, gum in sorted(dentition.gingiva.items()):
         mesh = _gum_mesh(builder, name, gum, materials["gingiva"])
         roots.append(builder.add("nodes", {"name": f"gingiva_{name}", "mesh": mesh,

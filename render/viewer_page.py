@@ -89,11 +89,14 @@ def viewer_html(glb: bytes, dentition, title: str, timeline: str = "day") -> str
 
 
 def write_viewer(out_dir: str | Path, dentition, keyframes: Sequence[SceneKeyframe], title: str,
-                 timeline: str = "day", shapes=None, labels: Sequence[str] | None = None) -> dict[str, Path]:
+                 timeline: str = "day", shapes=None, labels: Sequence[str] | None = None,
+                 changed=None) -> dict[str, Path]:
     """Write out_dir/animation.glb and out_dir/viewer.html (atomically); returns {"glb": path, "viewer": path}.
-    shapes: FDI -> (mesh, face_part) shown instead of the tooth models (`treatment_glb`)."""
+    shapes: FDI -> (mesh, face_part) shown instead of the tooth models; changed: FDI -> (keyframe,
+    (mesh, face_part)), a tooth's shape from that keyframe on (`treatment_glb`)."""
     out_dir = Path(out_dir)
-    glb = treatment_glb(dentition, keyframes, title=title, timeline=timeline, shapes=shapes, labels=labels)
+    glb = treatment_glb(dentition, keyframes, title=title, timeline=timeline, shapes=shapes, labels=labels,
+                        changed=changed)
     write_bytes(out_dir / GLB_NAME, glb)
     write_text(out_dir / PAGE_NAME, viewer_html(glb, dentition, title, timeline))
     return {"glb": out_dir / GLB_NAME, "viewer": out_dir / PAGE_NAME}
@@ -119,15 +122,20 @@ class SceneRecorder:
 
 
 # ------------------------------------------------------------------------------------------ a staging
-def stage_shapes(run) -> dict[int, tuple]:
-    """Each staged tooth's mesh as the stage models give it (`orthosim.staging.models.printable`, the
-    one place a stage model's tooth is made), with its faces' crown/root parts (local frame, mm)."""
+def stage_shapes(run, stage: int = 0) -> dict[int, tuple]:
+    """Each staged tooth's mesh at `stage` as the stage models give it (`orthosim.staging.models`:
+    `stage_tooth_meshes`, the planned interproximal reduction cut from stage 1 on, and `printable`),
+    with its faces' crown/root parts (local frame, mm)."""
     from orthosim.model.tooth import part_of_faces
-    from orthosim.staging.models import printable
+    from orthosim.staging.models import printable, stage_tooth_meshes
+    from orthosim.staging.reduction import reduced_meshes
 
+    plan = run.plan
+    reduced = reduced_meshes({n: run.dentition.teeth[n].mesh for n in plan.teeth}, plan.ipr, plan.target) \
+        if stage >= 1 and plan.ipr else None
     shapes = {}
-    for n in run.plan.teeth:
-        mesh = printable(run.dentition.teeth[n].mesh)
+    for n, mesh in stage_tooth_meshes(run.dentition, plan.teeth, stage, reduced).items():
+        mesh = printable(mesh)
         shapes[n] = (mesh, part_of_faces(mesh))
     return shapes
 
@@ -153,10 +161,18 @@ def staging_keyframes(run) -> list[SceneKeyframe]:
     return out
 
 
+def _same_mesh(a, b) -> bool:
+    return a.vertices.shape == b.vertices.shape and a.faces.shape == b.faces.shape \
+        and bool((a.vertices == b.vertices).all()) and bool((a.faces == b.faces).all())
+
+
 def write_staging_viewer(run, out_dir: str | Path) -> dict[str, Path]:
     """animation.glb (the stages as keyframes, the stage models' meshes) and viewer.html of a staging."""
+    whole = stage_shapes(run, 0)
+    cut = stage_shapes(run, 1) if run.plan.ipr and run.plan.n_stages >= 1 else {}
+    changed = {n: (1, shape) for n, shape in cut.items() if not _same_mesh(shape[0], whole[n][0])}
     return write_viewer(out_dir, run.dentition, staging_keyframes(run), run.case.name,
-                        timeline="stage", shapes=stage_shapes(run))
+                        timeline="stage", shapes=whole, changed=changed)
 
 
 # ------------------------------------------------------------------------------------------ a report

@@ -282,3 +282,45 @@ def test_a_scene_over_the_size_limit_gets_simplified_teeth_that_fit_it(dentition
     faces = sum(small.doc["accessors"][p["indices"]]["count"] // 3 for p in mesh["primitives"])
     assert faces < len(dentition.teeth[16].mesh.faces) / 2
     assert {p["extras"]["part"] for p in mesh["primitives"]} == {"crown", "root"}
+
+
+def _children_named(scene, name: str) -> list[int]:
+    return [i for i, n in enumerate(scene.doc["nodes"]) if n["name"] == name]
+
+
+def test_a_tooth_whose_shape_changes_at_a_keyframe_shows_its_new_shape_from_there_on(dentition, keyframes):
+    # a staging's tooth after its interproximal reduction: the cut shape from keyframe 1 on, the whole one before
+    import trimesh
+
+    whole = dentition.teeth[11]
+    cut = trimesh.Trimesh(whole.mesh.vertices * [0.9, 1.0, 1.0], whole.mesh.faces, process=False)
+    scene = read_glb(treatment_glb(dentition, keyframes, title="test", changed={11: (1, (cut, whole.face_part))}))
+    before, after = _children_named(scene, "tooth_11_still")
+    assert _sampled(scene, before, "scale")[:, 0].tolist() == [1.0, 0.0, 0.0]
+    assert _sampled(scene, after, "scale")[:, 0].tolist() == [0.0, 1.0, 1.0]
+    positions = scene.array(scene.doc["meshes"][scene.doc["nodes"][after]["mesh"]]["primitives"][0]["attributes"]["POSITION"])
+    assert np.abs(positions / MM - cut.vertices).max() < FLOAT32_MM
+
+
+@pytest.mark.slow  # the crowding case planned
+def test_the_stagings_scene_shows_each_reduced_tooth_cut_as_its_stage_models_from_stage_one(tmp_path):
+    from orthosim.staging.caseplan import plan_case
+    from orthosim.staging.models import printable, stage_tooth_meshes
+    from orthosim.staging.reduction import reduced_meshes
+    from orthosim_render.viewer_page import write_staging_viewer
+
+    run = plan_case(Path(__file__).resolve().parents[2] / "cases" / "staging_lower_incisor_crowding.toml")
+    plan = run.plan
+    assert plan.ipr, "the crowding case plans interproximal reduction"
+    scene = read_glb(write_staging_viewer(run, tmp_path)["glb"].read_bytes())
+    reduced = reduced_meshes({n: run.dentition.teeth[n].mesh for n in plan.teeth}, plan.ipr, plan.target)
+    stage_one = stage_tooth_meshes(run.dentition, plan.teeth, 1, reduced)
+    shown_reduced = [n for n in plan.teeth if len(_children_named(scene, f"tooth_{n}_still")) == 2]
+    assert len(shown_reduced) >= 2, "each IPR contact has two teeth shown reduced"
+    for n in shown_reduced:
+        before, after = _children_named(scene, f"tooth_{n}_still")
+        assert _sampled(scene, before, "scale")[1:, 0].max() == 0.0  # the whole tooth gone from stage 1
+        positions = scene.array(scene.doc["meshes"][scene.doc["nodes"][after]["mesh"]]["primitives"][0]["attributes"]["POSITION"])
+        model = printable(stage_one[n])
+        assert len(positions) == len(model.vertices)
+        assert np.abs(positions / MM - model.vertices).max() < FLOAT32_MM
