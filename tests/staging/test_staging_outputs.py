@@ -576,3 +576,23 @@ def test_every_kind_of_certified_figure_edited_at_random_is_named_by_verify(cert
         found, _ = compare(path, edited, recomputed)
         assert any(d.figure == figure and d.claimed == value for d in found), (kind, figure, value, found[:3])
         edit_tally[kind] = edit_tally.get(kind, 0) + 1
+
+
+@pytest.mark.slow  # over the fast tier's 2 s budget (tests/conftest.py)
+def test_a_stage_model_edited_or_missing_is_named_against_stages_json(crowding, tmp_path):
+    from orthosim.staging.modelcheck import check_stage_models
+    from orthosim.staging.verify import load_for_verify
+
+    bad = tmp_path / "bad"
+    shutil.copytree(crowding, bad)
+    model = bad / "models" / "stage_03_lower.stl"
+    moved = trimesh.load(model)
+    moved.apply_translation((0.0, 0.0, 0.05))  # the whole arch 0.05 mm labially: a stale or edited file
+    model.write_bytes(moved.export(file_type="stl"))
+    (bad / "models" / "stage_05_upper.stl").unlink()
+    written, dent_, _, target = load_for_verify(bad)
+    problems, checked = check_stage_models(bad / "models", written, dent_, target)
+    assert checked == 2 * (written.n_stages + 1) - 1
+    assert [(k, text.split(":")[0]) for k, text in problems] == [(3, "models/stage_03_lower.stl"), (5, "models/stage_05_upper.stl")]
+    assert "not stage 3 as stages.json poses it" in problems[0][1] and "missing" in problems[1][1]
+    assert check_stage_models(crowding / "models", written, dent_, target) == ([], 2 * (written.n_stages + 1))
