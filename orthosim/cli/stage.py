@@ -110,8 +110,10 @@ def _stage_into(case: Path, out: Path, limits, views, size, frames_per_stage: in
 @click.option("--limits", default=None, help="Check against these limits instead of the ones the staging was planned with.")
 @click.option("--all", "show_all", is_flag=True, help="Print every violation, one line each, not only the first.")
 def stage_verify(folder: Path, case: Path | None, limits: str | None, show_all: bool) -> None:
-    """Re-check a written staging from its files alone: limits per component, and no contact along
-    any stage's motion (dense exact sampling). Exit 0 when every stage holds, 1 naming the first violation."""
+    """Re-check a written staging from its files alone: limits per component, no contact along any
+    stage's motion (dense exact sampling), the IPR the case needs, every figure certificate.json
+    claims against its recomputation, and the stage models against stages.json. Exit 0 when all
+    hold, 1 naming the first violation or disagreement, 2 for a damaged or incomplete folder."""
     from orthosim.staging.limits import StageLimits
     from orthosim.staging.verify import load_for_verify, verify_staging
 

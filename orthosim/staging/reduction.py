@@ -26,6 +26,8 @@ from typing import Mapping, Sequence
 import numpy as np
 import trimesh
 
+from orthosim.errors import MeshError
+
 CACHE_SIZE = 64  # cut meshes remembered (a staging cuts two teeth per IPR contact)
 
 
@@ -83,8 +85,9 @@ def cut_tooth(mesh: trimesh.Trimesh, cuts: Sequence[EnamelCut]) -> trimesh.Trime
 
     solid = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.asarray(mesh.vertices, np.float64),
                                                   tri_verts=np.asarray(mesh.faces, np.uint64)))
-    if solid.status() != manifold3d.Error.NoError:
-        raise ValueError(f"a tooth mesh to reduce is not a closed manifold solid ({solid.status()})")
+    if solid.status() != manifold3d.Error.NoError or solid.is_empty():
+        raise MeshError(None, f"tooth {cuts[0].fdi}", f"is not a closed manifold solid ({solid.status().name}): "
+                        "its interproximal reduction cannot be cut", "repair the tooth's mesh (close its holes, one body)")
     for c in cuts:  # keep n . x <= offset: the trim keeps the side its normal points to
         solid = solid.trim_by_plane(tuple(-x for x in c.normal), -c.plane_offset(mesh))
     out = solid.to_mesh64()

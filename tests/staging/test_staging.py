@@ -255,3 +255,18 @@ def test_stage_command_writes_the_chart_the_poses_and_the_summary(tmp_path):
     assert (out / "ipr.csv").read_text().startswith("fdi_a,fdi_b,ipr_mm")
     assert json.loads((out / "run.json").read_text())["complete"] is True
     assert not list(out.glob(".*"))
+
+
+def test_a_cut_removes_exactly_its_depth_and_an_open_tooth_is_refused_in_one_line():
+    import trimesh
+
+    from orthosim.staging.reduction import EnamelCut, cut_tooth, reduced_depth
+
+    box = trimesh.creation.box((8.0, 10.0, 6.0))  # mm, a stand-in tooth
+    cut = EnamelCut(11, (1.0, 0.0, 0.0), 0.3)
+    reduced = cut_tooth(box, [cut])
+    assert reduced.is_watertight and reduced_depth(box, reduced, cut.normal) == pytest.approx(0.3, abs=1e-12)
+    assert reduced.volume == pytest.approx(box.volume * (8.0 - 0.3) / 8.0, rel=1e-12)
+    assert cut_tooth(box, [cut]) is reduced  # remembered, not cut again
+    with pytest.raises(OrthosimError, match="tooth 11: is not a closed manifold solid"):
+        cut_tooth(trimesh.Trimesh(box.vertices, box.faces[:-2]), [cut])
