@@ -19,7 +19,8 @@ import numpy as np
 from orthosim.evidence.models import STEP_DAYS, EvidenceModels, spec_case
 from orthosim.evidence.table import Curve, EvidenceRow
 from orthosim.model import fdi as F
-from orthosim.mechanics.biomechanics import DAYS_PER_MONTH, ToothMechanics, free_motion
+from orthosim.mechanics.biomechanics import ToothMechanics, free_motion
+from orthosim.mechanics.ratelaw import DAYS_PER_MONTH
 from orthosim.mechanics.resistance import CREST_BELOW_CEJ_MM
 
 RATE_DAYS = 90.0  # three monthly steps: the canine moves freely (its space is 7 mm)

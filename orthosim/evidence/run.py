@@ -7,7 +7,7 @@ import math
 from orthosim.evidence.models import EvidenceModels
 from orthosim.evidence.kinds import MEASURES
 from orthosim.evidence.table import EvidenceRow, RowResult, load_evidence
-from orthosim.mechanics.biomechanics import PARAMETER_SETS, RateLaw
+from orthosim.mechanics.ratelaw import PARAMETER_SETS, RateLaw
 
 
 def run_rows(bench: EvidenceModels, rows: tuple[EvidenceRow, ...]) -> list[RowResult]:

@@ -10,9 +10,7 @@ import trimesh
 
 from model_helpers import small_dentition
 
-from orthosim.model.dentition import Dentition
 from orthosim.model.dentition_cache import DentitionCacheWarning, cached_dentition, entry_path, is_cached
-from orthosim.model.tooth import Tooth, part_of_faces
 
 PARAMS = {"kind": "test", "size_mm": 8.0}
 
