@@ -38,12 +38,12 @@ def dentition():
 
 def draw(dentition, state, view):
     """(image, labels, the scene) of `state` from `view`, as a golden is drawn."""
-    from orthosim_render.regression import _renderer
+    from orthosim_render.frame import cached_renderer
     from orthosim_render.scene import DentitionScene
 
     scene = DentitionScene(dentition, SIZE)
     scene.update(state)
-    image, labels = render_labelled(_renderer(SIZE), scene, view)
+    image, labels = render_labelled(cached_renderer(SIZE), scene, view)
     return image, labels, scene
 
 
@@ -62,13 +62,13 @@ def expected_shift(scene, point: np.ndarray, move_mm: np.ndarray) -> tuple[float
 
 
 def test_the_label_pass_leaves_the_image_bit_identical_and_labels_every_drawn_pixel(dentition):
-    from orthosim_render.regression import _renderer
+    from orthosim_render.frame import cached_renderer
     from orthosim_render.scene import DentitionScene
 
     state = FrameState.rest(dentition)
     plain = DentitionScene(dentition, SIZE)
     plain.update(state)
-    image = _renderer(SIZE).render(plain, "frontal")
+    image = cached_renderer(SIZE).render(plain, "frontal")
     labelled, labels, _ = draw(dentition, state, "frontal")
     assert np.array_equal(image, labelled)
     background = np.all(image == image[0, 0], axis=2)
