@@ -114,7 +114,7 @@ def test_the_paper_set_keeps_the_replication_values_and_a_case_without_the_table
 
 
 def test_a_case_picks_the_clinical_set_and_may_override_one_constant(tmp_path):
-    from orthosim.exchange.case import load_case
+    from orthosim import load_case
     from orthosim.movement.model import MovementSettings
 
     path = tmp_path / "c.toml"

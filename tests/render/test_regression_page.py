@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 USER_TESTS = """
 import os
-from orthosim.exchange.case import load_case
+from orthosim import load_case
 from orthosim_render.frame_state import FrameState
 from orthosim_render.frame import render_state
 from orthosim_render.regression import DEFAULT_SIZE, RenderedFrame, gl_identity

@@ -31,7 +31,7 @@ GL = GoldenSidecar(gl_renderer="llvmpipe (test)", mesa_version="1.0")  # both si
 
 @pytest.fixture(scope="module")
 def dentition():
-    from orthosim.exchange.case import load_case
+    from orthosim import load_case
 
     return load_case(ROOT / "cases" / "normal_occlusion.toml").build_dentition()
 
@@ -304,7 +304,7 @@ def test_on_real_teeth_a_moved_canine_and_a_removed_incisor_are_named_exactly():
     the parametric ones."""
     import warnings
 
-    from orthosim.exchange.case import load_case
+    from orthosim import load_case
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the scan's estimated axes and interpenetrations, said elsewhere
