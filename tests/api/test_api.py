@@ -47,6 +47,7 @@ def test_import_orthosim_loads_no_numerical_library():
     assert done.stdout.strip() == "[]"
 
 
+@pytest.mark.slow  # imports the whole library: over the fast tier's 2 s budget under load
 def test_every_public_name_resolves_and_says_what_it_is():
     for name in orthosim.__all__:
         value = getattr(orthosim, name)
@@ -64,6 +65,7 @@ def test_a_bad_case_file_is_an_orthosim_error(tmp_path):
         orthosim.load_case(bad)
 
 
+@pytest.mark.slow  # builds a model (teeth, sphere trees) and simulates: over the fast tier's 2 s budget
 def test_simulate_gives_each_step_and_contacts_finds_what_the_step_found(small):
     model = orthosim.build(small)
     records = list(orthosim.simulate(model, steps=2, detector="continuous"))
