@@ -9,8 +9,6 @@ plain loop that places both prebuilt BVH objects and calls `fcl.collide` per pai
 from __future__ import annotations
 
 import time
-import json
-from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
 import fcl
@@ -35,11 +33,6 @@ def round_robin_us(fns: dict[str, Callable[[], object]], repeats: int) -> dict[s
             fn()
             times[k].append(time.perf_counter() - t0)
     return {k: np.array(v) * 1e6 for k, v in times.items()}
-
-
-def median_us(fns: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
-    """Median microseconds of each callable (see `round_robin_us`)."""
-    return {k: float(np.median(v)) for k, v in round_robin_us(fns, repeats).items()}
 
 
 def perturbed_poses(poses: Mapping[int, np.ndarray], step_mm: float = 0.1, step_deg: float = 0.2, seed: int = 0) -> dict[int, np.ndarray]:

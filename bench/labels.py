@@ -41,10 +41,10 @@ def _paired(first, second, rounds: int) -> tuple[float, float, float]:
 
 def _subject_times(dentition, state, view: str, size, rounds: int) -> dict:
     from orthosim_render.semantic_labels import render_labelled
-    from orthosim_render.regression import _renderer, render_state
+    from orthosim_render.frame import cached_renderer, render_state
     from orthosim_render.scene import DentitionScene
 
-    renderer = _renderer(size)
+    renderer = cached_renderer(size)
     render_state(dentition, state, view, size, labels=True)  # warm: shaders compiled, trees built
     golden, labelled, label = _paired(lambda: render_state(dentition, state, view, size),
                                       lambda: render_state(dentition, state, view, size, labels=True), rounds)

@@ -109,10 +109,6 @@ def _rollup_kb(pid: int) -> dict[str, int]:
     return out
 
 
-def _pss_kb(pid: int) -> int:
-    return _rollup_kb(pid)["Pss"]
-
-
 _PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
 _PFN_MASK = (1 << 55) - 1
 _PRESENT = 1 << 63

@@ -9,6 +9,8 @@ when something first draws, in `offscreen_backend`, and only then is PYOPENGL_PL
   loop), `cameras` (the five named views), `cej` (crown and root split at the CEJ for colouring),
   `standin` (simple shapes for what has no mesh), `spheretree_view` (sphere trees drawn),
   `contact_faces` (exact contact faces per frame, each answer computed once while it holds).
+- The library's picture of a step: `frame` (`render_frame(model, record)`, a `Frame` array a notebook
+  shows as a picture), also `orthosim_render.render_frame` and `orthosim_render.Frame`.
 - Frames and video: `frame_state` (what one frame shows), `timeline` (frames from step records),
   `overlay` (case, day counter, legend, FDI labels), `animation` (frames, MP4, GIF, the run's
   drawing), `png` (fast PNG writing), `cputime` (CPU per frame of every thread and child).
@@ -23,3 +25,14 @@ when something first draws, in `offscreen_backend`, and only then is PYOPENGL_PL
   `regression` (a case's step drawn for a test), `semantic_labels` (what each pixel shows), `explain`
   (what changed, tooth by tooth), `pytest_plugin` (the `orthosim_image_regression` fixture).
 """
+
+_FROM = {"render_frame": "orthosim_render.frame", "Frame": "orthosim_render.frame"}  # loaded on first use (PEP 562)
+__all__ = sorted(_FROM)
+
+
+def __getattr__(name: str):
+    if name not in _FROM:
+        raise AttributeError(f"module 'orthosim_render' has no attribute {name!r}")
+    import importlib
+
+    return getattr(importlib.import_module(_FROM[name]), name)

@@ -258,6 +258,3 @@ def select(request: str | None = None) -> GLBackend:
     return backend
 
 
-def selected() -> GLBackend | None:
-    """The backend this process chose, None before anything asked to draw."""
-    return _chosen

@@ -19,7 +19,7 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
-from orthosim_render.scene import (BACKGROUND, CONTACT_COLOR, CROWN_COLOR, ESTIMATED_ROOT_COLOR, GINGIVA_COLOR,
+from orthosim_render.scene import (CONTACT_COLOR, CROWN_COLOR, ESTIMATED_ROOT_COLOR, GINGIVA_COLOR,
                                   MOVING_TINT)
 
 TEXT_COLOR = (236, 238, 242)
@@ -35,7 +35,6 @@ def _rgb8(c) -> tuple[int, int, int]:
 
 MOVING_RGB = _rgb8(np.multiply(CROWN_COLOR, MOVING_TINT))
 CONTACT_RGB = _rgb8(CONTACT_COLOR)
-BACKGROUND_RGB = _rgb8(BACKGROUND)
 LEGEND = (("moving", MOVING_RGB, "box"), ("contact", CONTACT_RGB, "box"), ("extracted (gap)", GAP_COLOR, "ring"))
 
 

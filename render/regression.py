@@ -1,4 +1,5 @@
-"""Renders for image regression tests: one simulation step of a case, in one view, at one size, as an array.
+"""Renders for image regression tests: one simulation step of a case, in one view, at one size, as an array
+(drawn by `orthosim_render.frame.render_state`, what `render_frame` draws for a script).
 
     from orthosim_render.regression import render_case_frame
     frame = render_case_frame("cases/case1_first_premolar_extraction.toml", step=-1, view="right_buccal")
@@ -25,6 +26,7 @@ import numpy as np
 from orthosim import __version__
 from orthosim.storage.checksums import file_sha256
 
+from orthosim_render.frame import cached_renderer, render_state
 from orthosim_render.imgdiff import GoldenSidecar
 
 DEFAULT_SIZE = (320, 240)
@@ -53,16 +55,9 @@ def mesa_version(gl_version: str) -> str | None:
     return match.group(1) if match else None
 
 
-@functools.cache
-def _renderer(size: tuple[int, int]):
-    from orthosim_render.renderer import Renderer
-
-    return Renderer(size)
-
-
 def gl_identity() -> GoldenSidecar:
     """This process's offscreen backend, GL renderer string and Mesa version (from its context), the rest unset."""
-    r = _renderer(DEFAULT_SIZE)
+    r = cached_renderer(DEFAULT_SIZE)
     return GoldenSidecar(gl_renderer=r.gl_renderer, mesa_version=mesa_version(r.gl_version), gl_backend=r.backend.label,
                          orthosim_version=__version__)
 
@@ -75,24 +70,6 @@ def this_machine_gl() -> GoldenSidecar | None:
         return gl_identity()
     except RenderSetupError:
         return None
-
-
-def render_state(dentition, state, view: str = "frontal", size: tuple[int, int] = DEFAULT_SIZE, *,
-                 hide_roots: bool = False, contact_faces: bool = False, labels: bool = False):
-    """(h, w, 3) uint8: `state` (a `orthosim_render.frame_state.FrameState`) of `dentition` from preset `view`.
-
-    `labels=True`: (image, its `LabelFrame`), drawn in the same pass (the image is the same).
-    """
-    from orthosim_render.scene import DentitionScene
-
-    scene = DentitionScene(dentition, size, hide_roots=hide_roots, contact_faces=contact_faces)
-    scene.update(state)
-    renderer = _renderer((int(size[0]), int(size[1])))
-    if labels:
-        from orthosim_render.semantic_labels import render_labelled
-
-        return render_labelled(renderer, scene, view)
-    return renderer.render(scene, view)
 
 
 @dataclass(frozen=True, eq=False)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from orthosim.errors import CaseError
-from orthosim.exchange.case import load_case
+from orthosim import load_case
 
 BASE = """
 [model]

@@ -11,7 +11,8 @@ from pathlib import Path
 import click
 
 from orthosim.exchange.shareddata import open_full_jaw_dir
-from orthosim.collision.contract import DETECTORS, CollisionError, CollisionRequest
+from orthosim.collision.contract import CollisionError, CollisionRequest
+from orthosim.collision.detectors import DETECTORS
 
 
 

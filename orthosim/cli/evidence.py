@@ -20,7 +20,7 @@ def evidence(out_dir: Path, parameters: str, no_real: bool) -> None:
 
     from orthosim.evidence import load_evidence, run_rows
     from orthosim.evidence.run import evidence_models
-    from orthosim.mechanics.biomechanics import DAYS_PER_MONTH, PARAMETER_SETS
+    from orthosim.mechanics.ratelaw import DAYS_PER_MONTH, PARAMETER_SETS
     from orthosim.runtime.outputfolder import output_folder
 
     law = PARAMETER_SETS[parameters]

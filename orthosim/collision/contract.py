@@ -17,7 +17,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from orthosim.collision.detectors import DETECTORS
 from orthosim.errors import OrthosimError
 
 
@@ -172,6 +171,7 @@ class Contacts:
     """The contacts of one set of poses, as a detector sees them (`detect.contacts`).
 
     touching: pairs (FDI) in contact, in the order of the pairs asked about.
+
     centers (n, 3) mm, radii (n,) mm: what is drawn as contact: overlapping leaf spheres of the
         touching pairs (both teeth's) for the sphere-tree detectors, one lens sphere per pair for
         circles, none for the exact detector.

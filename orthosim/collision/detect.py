@@ -17,7 +17,8 @@ from orthosim.geometry import meshquery
 from orthosim.collision.broadphase import candidate_pairs, sweep_and_prune
 from orthosim.collision.circles import bounding_circles, circles_overlap, overlap_spheres
 from orthosim.collision.continuous import refine_time_of_contact, swept_leaves
-from orthosim.collision.contract import DETECTORS, CollisionError, CollisionRequest, Contacts, StepResult, empty_leaves
+from orthosim.collision.detectors import DETECTORS
+from orthosim.collision.contract import CollisionError, CollisionRequest, Contacts, StepResult, empty_leaves
 from orthosim.collision.detectors import CIRCLES, DISCRETE, Detector, detector_named
 from orthosim.collision.discrete import overlapping_leaves
 from orthosim.collision.model import CollisionModel

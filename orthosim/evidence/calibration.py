@@ -23,7 +23,7 @@ import numpy as np
 
 from orthosim.evidence.models import EvidenceModels
 from orthosim.evidence.table import EvidenceRow, load_evidence
-from orthosim.mechanics.biomechanics import DAYS_PER_MONTH, PARAMETER_SETS, RateLaw
+from orthosim.mechanics.ratelaw import DAYS_PER_MONTH, PARAMETER_SETS, RateLaw
 
 FITTED_KINDS = ("rate", "rate_ratio", "anchorage_canine", "anchorage_en_masse")
 # starting points (F_0 cN, F_sat cN, r_max mm/month, k): the law is flat past saturation, so a

@@ -17,7 +17,7 @@ from orthosim.evidence import centres
 from orthosim.evidence.models import STEP_DAYS, EvidenceModels, spec_case
 from orthosim.evidence.table import Curve, EvidenceRow
 from orthosim.model import fdi as F
-from orthosim.mechanics.biomechanics import DAYS_PER_MONTH
+from orthosim.mechanics.ratelaw import DAYS_PER_MONTH
 
 RATE_DAYS = 90.0  # three monthly steps: the canine moves freely (its space is 7 mm)
 MAX_CLOSING_STEPS = 24  # anchorage runs stop when the space closes, or after two years

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from orthosim.evidence.models import EvidenceModels
 from orthosim.evidence.kinds import MEASURES
 from orthosim.evidence.table import EvidenceRow, RowResult, load_evidence
-from orthosim.mechanics.biomechanics import PARAMETER_SETS, RateLaw
+from orthosim.mechanics.ratelaw import PARAMETER_SETS, RateLaw
 
 
 def run_rows(bench: EvidenceModels, rows: tuple[EvidenceRow, ...]) -> list[RowResult]:
@@ -32,12 +32,12 @@ def evidence_models(law: RateLaw | None = None, with_real: bool = True) -> Evide
     from orthosim.exchange.case import default_resistance_rule
     from orthosim.exchange.shareddata import open_full_jaw_dir
 
-    real = None
-    if with_real and open_full_jaw_dir("maxilla").is_dir():
-        def real():
-            from orthosim.exchange.case import CASES_DIR, load_case
+    def patient26():
+        from orthosim.exchange.case import CASES_DIR, load_case
 
-            return load_case(CASES_DIR / "open_full_jaw_patient26.toml").build_dentition()
+        return load_case(CASES_DIR / "open_full_jaw_patient26.toml").build_dentition()
+
+    real = patient26 if with_real and open_full_jaw_dir("maxilla").is_dir() else None
     law = law or PARAMETER_SETS["clinical"]
     name = "paper" if law == PARAMETER_SETS["paper"] else "clinical"
     return EvidenceModels(law, real, resistance_rule=default_resistance_rule("parametric", name))

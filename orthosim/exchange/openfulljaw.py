@@ -33,7 +33,7 @@ from orthosim.model.dentition import Dentition
 from orthosim.errors import MeshError
 from orthosim.collision.interpenetration import report_rest_interpenetration
 from orthosim.exchange.meshload import CEJ_RULE, DEFAULT_MAX_TRIANGLES, MeshRepairWarning, ToothAxes, load_tooth_mesh, principal_long_axis
-from orthosim.exchange.scanfolders import _TOOTH_FILE, ARCH_FOLDERS, scan_folders  # noqa: F401 (ARCH_FOLDERS: re-exported)
+from orthosim.exchange.scanfolders import _TOOTH_FILE, scan_folders
 from orthosim.exchange.scanframe import ORIGIN_RULE, place_scan
 
 # A mesh longer than this times its next-widest extent has a principal axis to trust as long axis

@@ -44,7 +44,6 @@ A couple acting alone turns the tooth as fast as the force M / d at the bracket 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,7 +51,7 @@ import numpy as np
 from orthosim.mechanics.vec import length
 
 from orthosim.model.fdi import Arch
-from orthosim.mechanics.ratelaw import DAYS_PER_MONTH, PARAMETER_SETS, RateLaw
+from orthosim.mechanics.ratelaw import RateLaw
 from orthosim.model.tooth import ROOT, Tooth
 from orthosim.mechanics.resistance import center_of_resistance, tipping_center
 from orthosim.mechanics.ligament import DEFAULT as DEFAULT_LIGAMENT, LigamentProperties, RootSupport, root_support

@@ -16,6 +16,13 @@ from orthosim.model.tooth import Tooth
 
 @dataclass(frozen=True, eq=False)
 class Dentition:
+    """A patient's teeth as the simulation sees them: `teeth` {FDI: `Tooth`} (extractions are a
+    case's state, not the model's, so an extracted tooth is still here), a one-line `description`,
+    `info` on how it was built (arch form, offsets, source files) and the scanned gum per arch
+    (`gingiva`, drawn and exported, never collided). Arch frame, mm: +y up, +z anterior, +x to the
+    patient's left; `rest_poses()` gives {FDI: (4, 4) tooth frame -> arch frame}.
+    """
+
     teeth: dict[int, Tooth]  # FDI -> tooth model
     description: str = ""
     info: dict = field(default_factory=dict)  # how it was built (arch form, offsets, source files)

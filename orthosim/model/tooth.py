@@ -29,6 +29,16 @@ ROOT = 1  # face part code: root, apical of the CEJ
 
 @dataclass(frozen=True, eq=False)
 class Tooth:
+    """One tooth's model: its closed mesh in its own frame and where it sits in the arch.
+
+    The tooth frame (mm): origin at the cemento-enamel junction on the long axis, +y from the apex
+    to the crown, +z labial/buccal (`mesial` gives the mesial direction). `mesh`: closed trimesh in
+    that frame, mm; `face_part`: (n_faces,) int8, crown or root per face; `crown_center`, `apex`:
+    (3,) mm in that frame; `rest_pose`: (4, 4) tooth frame -> arch frame, mm, the tooth before any
+    movement; `landmarks`: name -> (3,) mm; `source`: where the mesh came from; `root_origin`:
+    "scan" or "estimated" (a crown's root built by `orthosim.model.rootsynthesis`).
+    """
+
     fdi: int
     mesh: trimesh.Trimesh  # closed, outward normals, local frame, mm
     face_part: np.ndarray  # (n_faces,) int8, CROWN or ROOT per face

@@ -177,7 +177,6 @@ class ClosureModel:  # eq=False and no slots: `_boxes` is cached in the instance
         surfaces = {n: mesh_surface(dentition.teeth[n].mesh) for n in crowns}
         model = cls(settings, axis, facing, {}, crowns, surfaces)
         for u, lo in touched:
-            tu, tl = dentition.teeth[u], dentition.teeth[lo]
             model.overlaps[(u, lo)] = RestOverlap(model.vertex_depths(u, lo, rest), model.vertex_depths(lo, u, rest))
         lower = [n for n in dentition.fdis if F.arch_of(n) is F.Arch.LOWER and n not in absent]
         molars = [n for n in lower if F.position(n) == 6] or lower

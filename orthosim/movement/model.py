@@ -13,8 +13,9 @@ from typing import TYPE_CHECKING, Callable
 from orthosim.collision import CollisionModel, candidate_pairs
 from orthosim.exchange.case import Case
 from orthosim.errors import CaseError
-from orthosim.mechanics.biomechanics import DAYS_PER_MONTH, PARAMETER_SETS, RateLaw, ToothMechanics, build_mechanics
+from orthosim.mechanics.biomechanics import ToothMechanics, build_mechanics
 from orthosim.mechanics.ligament import DEFAULT as DEFAULT_LIGAMENT, LigamentProperties
+from orthosim.mechanics.ratelaw import DAYS_PER_MONTH, PARAMETER_SETS, RateLaw
 from orthosim.collision.interpenetration import default_occlusal_slide_mm
 from orthosim.model import fdi as F
 from orthosim.model.dentition import Dentition

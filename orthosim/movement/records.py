@@ -55,8 +55,10 @@ class StepRecord:
     moving: teeth that moved in the step. touching: pairs in contact at the step's end.
     contact_centers (n, 3) mm / contact_radii (n,) mm: overlapping leaf spheres of touching pairs.
     collisions: events of the step. forces: the step's force balance (cN).
+
     max_penetration_mm: deepest interpenetration the run has added to any candidate pair, on the
         exact meshes (mm; depth now less depth in the initial model, which may have some).
+
     distances: the paper's tooth-to-tooth distances (mm) per adjacent pair.
     raw_penetration_mm: deepest interpenetration of any candidate pair as it stands (mm).
     penetrating: ((a, b), mm) for every candidate pair interpenetrating as it stands, deepest first.

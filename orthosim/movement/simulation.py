@@ -58,7 +58,7 @@ from orthosim.exchange.case import Case
 from orthosim.model.dentition import Dentition
 from orthosim.movement.detection import detection
 from orthosim.movement.forces import forces
-from orthosim.movement.model import MovementModel, MovementSettings  # noqa: F401 (the model's names, also read from here)
+from orthosim.movement.model import MovementModel
 from orthosim.movement.motions import motions
 from orthosim.movement.propagation import ForceBalance
 from orthosim.movement.records import BiteRecord, CollisionEvent, StepRecord

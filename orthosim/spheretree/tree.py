@@ -25,6 +25,14 @@ from orthosim.system.firstrun import announce_compiles
 
 @dataclass(frozen=True, eq=False)
 class SphereTree:
+    """A tooth's bounding-sphere hierarchy in its own frame (mm): each level's sphere centres
+    ((n_k, 3) float64) and radii ((n_k,) float64), each sphere's parent in the level above, and
+    which leaf sphere covers each mesh face. Every sphere encloses the part of the mesh its
+    leaves cover, so two trees that do not overlap mean two teeth that do not touch; `branching`
+    children per sphere (the paper's octree: 1, 8, 64, 512 spheres by level); `method`: how the
+    spheres were fitted.
+    """
+
     branching: int
     centers: tuple[np.ndarray, ...]  # per level: (n_k, 3) float64, mm, local frame
     radii: tuple[np.ndarray, ...]  # per level: (n_k,) float64, mm

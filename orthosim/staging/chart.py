@@ -91,12 +91,6 @@ def summary_line(plan: StagingPlan, name: str = "") -> str:
     return text
 
 
-def max_stage_components(plan: StagingPlan) -> np.ndarray:
-    """(6,) the largest absolute stage component of any tooth (mm, mm, mm, deg, deg, deg)."""
-    c = plan.stage_components()
-    return np.abs(c).reshape(-1, len(COMPONENTS)).max(axis=0) if c.size else np.zeros(len(COMPONENTS))
-
-
 @dataclass(frozen=True)
 class MovementRow:
     """One tooth's whole movement: the movement table's row."""

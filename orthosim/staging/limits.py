@@ -24,6 +24,9 @@ class LimitsError(OrthosimError):
 
 @dataclass(frozen=True)
 class StageLimits:
+    """The most one aligner stage may move a tooth, per component: mesial/distal, buccal/lingual
+    and extrusion/intrusion in mm; tip, torque and rotation in degrees."""
+
     mesial: float = 0.25  # mm per stage, mesial or distal
     buccal: float = 0.25  # mm per stage, buccal or lingual
     extrusion: float = 0.15  # mm per stage, extrusion or intrusion

@@ -276,9 +276,3 @@ def _choose_hold(checker, dentition, teeth, starts, targets, s, proposal, ia, ib
     return [ia] if approach(ia, ib) >= approach(ib, ia) else [ib]
 
 
-def lower_bound_of(dentition: Dentition, start, target, limits: StageLimits) -> int:
-    """The largest per-tooth stage count from the limits alone."""
-    totals = np.stack([movement_components(dentition.teeth[n], start[n], start[n], target[n]) for n in target])
-    return int(stage_counts(totals, limits).max(initial=0))
-
-

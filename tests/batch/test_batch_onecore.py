@@ -192,7 +192,7 @@ def test_the_second_run_of_a_model_builds_no_bvh_and_gives_the_same_metrics(case
 
 
 def test_a_one_core_render_writes_the_pipelined_files_and_a_failed_one_leaves_none(tmp_path):
-    from orthosim.errors import OrthosimError
+    from orthosim import OrthosimError
     from orthosim_render.animation import render_run
     from orthosim_bench.render import SyntheticMotion
     from orthosim_render.frame_state import FrameState

@@ -33,7 +33,7 @@ def test_a_circles_contact_is_a_sphere_in_the_overlap_of_the_two_circles():
 
 
 def test_a_circles_simulation_records_contacts_for_its_touching_pairs():
-    from orthosim.exchange.case import load_case
+    from orthosim import load_case
     from orthosim.movement.simulation import MovementModel, simulate
 
     from pathlib import Path

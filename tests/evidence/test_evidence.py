@@ -22,7 +22,7 @@ import pytest
 from cli_helpers import orthosim
 from orthosim.evidence import load_evidence, run_evidence
 from orthosim.errors import CaseError
-from orthosim.mechanics.biomechanics import DAYS_PER_MONTH, PARAMETER_SETS, RateLaw
+from orthosim.mechanics.ratelaw import DAYS_PER_MONTH, PARAMETER_SETS, RateLaw
 
 VERDICTS = {
     "monini2019_upper_canine_rate": "inside",
@@ -138,7 +138,7 @@ def test_the_clinical_constants_are_the_least_squares_fit_to_the_table():
 
 def test_the_paper_set_keeps_the_replication_values_and_a_case_without_the_table_uses_it():
     from orthosim.exchange.case import CASES_DIR, load_case
-    from orthosim.movement.simulation import MovementSettings
+    from orthosim.movement.model import MovementSettings
 
     assert PARAMETER_SETS["paper"] == RateLaw() == RateLaw(20.0, 150.0, 1.0 / 30.0, 200.0, 1.0)
     for name in ("case1_first_premolar_extraction", "case2_second_premolar_extraction", "case3_incisor_space_closure"):
@@ -147,8 +147,8 @@ def test_the_paper_set_keeps_the_replication_values_and_a_case_without_the_table
 
 
 def test_a_case_picks_the_clinical_set_and_may_override_one_constant(tmp_path):
-    from orthosim.exchange.case import load_case
-    from orthosim.movement.simulation import MovementSettings
+    from orthosim import load_case
+    from orthosim.movement.model import MovementSettings
 
     path = tmp_path / "c.toml"
     path.write_text('[model]\nresolution = "coarse"\n[[loads]]\nteeth = [13]\nforce_cN = 98\n'

@@ -10,9 +10,7 @@ import trimesh
 
 from model_helpers import small_dentition
 
-from orthosim.model.dentition import Dentition
 from orthosim.model.dentition_cache import DentitionCacheWarning, cached_dentition, entry_path, is_cached
-from orthosim.model.tooth import Tooth, part_of_faces
 
 PARAMS = {"kind": "test", "size_mm": 8.0}
 
@@ -91,7 +89,7 @@ def test_two_processes_filling_one_entry_at_once_both_get_whole_teeth(tmp_path):
 
 
 def test_a_cases_diastema_is_part_of_its_cached_model_not_served_from_the_same_teeth_without_it(tmp_path, monkeypatch):
-    from orthosim.exchange.case import load_case
+    from orthosim import load_case
 
     monkeypatch.setenv("ORTHOSIM_CACHE", str(tmp_path / "cache"))
     teeth = tmp_path / "teeth"

@@ -12,7 +12,7 @@ import trimesh
 from collision_helpers import median_split_tree
 from orthosim.collision import CollisionModel, ExactQueries
 from orthosim.errors import CaseError
-from orthosim.exchange.case import load_case
+from orthosim import load_case
 from orthosim.model.dentition import Dentition
 from orthosim.model.tooth import Tooth, part_of_faces
 from orthosim.movement.closure import (ClosureModel, ClosureSettings, close_bite, closure_settings,

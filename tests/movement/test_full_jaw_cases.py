@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from orthosim.exchange.case import load_case
+from orthosim import load_case
 from orthosim.collision import ExactQueries
 from orthosim.movement import MovementModel, simulate
 from orthosim.movement.report import RunReport

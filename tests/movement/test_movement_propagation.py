@@ -66,7 +66,7 @@ def test_a_molar_pushing_two_touching_teeth_moves_the_free_end_at_the_rate_of_it
     share x 400, 15 receives share x that, and 15 moves at the rate of what it receives into the
     space, toward the canine; 16 and 17, blocked, follow it."""
     from collision_helpers import median_split_tree
-    from orthosim.exchange.case import load_case
+    from orthosim import load_case
     from orthosim.collision import CollisionModel
     from orthosim.movement import MovementModel, simulate
     from orthosim.mechanics.biomechanics import RateLaw

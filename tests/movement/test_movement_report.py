@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from collision_helpers import median_split_tree
-from orthosim.exchange.case import load_case
+from orthosim import load_case
 from orthosim.collision import CollisionModel
 from orthosim.analysis.metrics import tooth_to_tooth_distances
 from orthosim.movement import MovementModel, simulate

@@ -221,7 +221,7 @@ def test_a_pytest_session_that_never_asks_for_the_fixture_is_left_as_it_was(tmp_
 
 _TWO_RENDERERS = textwrap.dedent("""
     import numpy as np
-    from orthosim.exchange.case import load_case
+    from orthosim import load_case
     from orthosim_render.frame_state import FrameState
     from orthosim_render.renderer import Renderer
     from orthosim_render.scene import DentitionScene

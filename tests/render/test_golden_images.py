@@ -58,7 +58,7 @@ def test_paper_case_last_step_with_contacts_matches_its_golden(orthosim_image_re
 
 def test_sphere_tree_levels_of_a_first_molar_match_their_golden(orthosim_image_regression):
     """Figure 2: tooth 16, then its spheres at every level below the root, side by side."""
-    from orthosim.exchange.case import load_case
+    from orthosim import load_case
     from orthosim.spheretree import cached_sphere_tree
     from orthosim_render.spheretree_view import render_sphere_tree
 
@@ -72,10 +72,10 @@ def test_sphere_tree_levels_of_a_first_molar_match_their_golden(orthosim_image_r
 def test_distance_map_of_case1_before_treatment_matches_its_golden(orthosim_image_regression):
     """The report's inter-arch distance map (an occlusal map): every upper crown vertex coloured by
     its exact distance to the lower arch, case 1 at rest, seen from below (maxillary occlusal)."""
-    from orthosim.exchange.case import load_case
+    from orthosim import load_case
     from orthosim.analysis.distancemap import DistanceMapModel
     from orthosim_render.frame_state import FrameState
-    from orthosim_render.regression import _renderer
+    from orthosim_render.frame import cached_renderer
     from orthosim_render.report.pictures import distance_colors
     from orthosim_render.scene import DentitionScene, paint_crowns
 
@@ -86,5 +86,5 @@ def test_distance_map_of_case1_before_treatment_matches_its_golden(orthosim_imag
     scene = DentitionScene(dent, SIZE, hide_roots=True, show_markers=False)  # as the report draws it: CEJ cut
     paint_crowns(scene, {n: distance_colors(m.distance_mm) for n, m in maps.items()})
     scene.update(FrameState(poses=poses, extracted=frozenset(case.extractions)))
-    image = _renderer(SIZE).render(scene, "maxillary_occlusal")
+    image = cached_renderer(SIZE).render(scene, "maxillary_occlusal")
     orthosim_image_regression.check(image, "distance_map_case1_initial_maxillary_occlusal")

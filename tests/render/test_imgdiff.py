@@ -56,14 +56,16 @@ def test_an_unchanged_render_passes_its_golden_exactly(tmp_path):
 
 
 def test_a_tooth_moved_by_0_2_mm_is_caught_exactly_and_within_tolerance():
-    from orthosim_render.regression import render_state, simulate_case_once
+    from orthosim_render.frame import render_state
+    from orthosim_render.regression import DEFAULT_SIZE, simulate_case_once
 
     run = simulate_case_once(CASES / "normal_occlusion.toml", steps=0)
     state = run.state(0)
     tooth = run.dentition.teeth[11]
     pose = state.poses[11].copy()
     pose[:3, 3] += 0.2 * (pose[:3, :3] @ tooth.mesial)  # 0.2 mm toward the midline
-    moved = render_state(run.dentition, dataclasses.replace(state, poses={**state.poses, 11: pose}), "frontal")
+    moved = render_state(run.dentition, dataclasses.replace(state, poses={**state.poses, 11: pose}), "frontal",
+                         DEFAULT_SIZE)
     golden, sidecar = read_png(NORMAL_FRONTAL), read_sidecar(NORMAL_FRONTAL)
 
     exact = compare_images(golden, moved, sidecar, sidecar)
@@ -75,7 +77,8 @@ def test_a_tooth_moved_by_0_2_mm_is_caught_exactly_and_within_tolerance():
 
 def test_one_missing_contact_marker_is_caught(tmp_path):
     """Case 3's last step drawn with one contact sphere left out: the one nearest the frontal camera."""
-    from orthosim_render.regression import render_state, simulate_case_once
+    from orthosim_render.frame import render_state
+    from orthosim_render.regression import DEFAULT_SIZE, simulate_case_once
 
     run = simulate_case_once(CASES / "case3_incisor_space_closure.toml")
     state = run.state(-1)
@@ -86,7 +89,7 @@ def test_one_missing_contact_marker_is_caught(tmp_path):
     one_less = dataclasses.replace(state, contact_centers=state.contact_centers[keep],
                                    contact_radii=state.contact_radii[keep])
     assert len(np.unique(spheres[keep], axis=0)) == len(distinct) - 1
-    image = render_state(run.dentition, one_less, "frontal")
+    image = render_state(run.dentition, one_less, "frontal", DEFAULT_SIZE)
     golden, sidecar = read_png(CASE3_FRONTAL), read_sidecar(CASE3_FRONTAL)
 
     result = compare_images(golden, image, sidecar, sidecar)

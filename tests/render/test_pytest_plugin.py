@@ -5,7 +5,6 @@ Each test runs pytest in a child process on a small project in tmp_path, as a us
 
 from __future__ import annotations
 
-import os
 import re
 import subprocess
 import sys

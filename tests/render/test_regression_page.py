@@ -21,16 +21,17 @@ ROOT = Path(__file__).resolve().parents[2]
 
 USER_TESTS = """
 import os
-from orthosim.exchange.case import load_case
+from orthosim import load_case
 from orthosim_render.frame_state import FrameState
-from orthosim_render.regression import RenderedFrame, gl_identity, render_state
+from orthosim_render.frame import render_state
+from orthosim_render.regression import DEFAULT_SIZE, RenderedFrame, gl_identity
 
 DENT = load_case({case!r}).build_dentition()
 CHANGE = os.path.exists("change")
 
 
 def frame(state, view):
-    image, labels = render_state(DENT, state, view, labels=True)
+    image, labels = render_state(DENT, state, view, DEFAULT_SIZE, labels=True)
     return RenderedFrame(image, gl_identity(), labels)
 
 

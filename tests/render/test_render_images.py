@@ -24,7 +24,7 @@ BG = np.round(np.array(BACKGROUND) * 255)
 
 @pytest.fixture(scope="module")
 def dentition():
-    from orthosim.exchange.case import load_case
+    from orthosim import load_case
 
     return load_case(ROOT / "cases" / "normal_occlusion.toml").build_dentition()
 

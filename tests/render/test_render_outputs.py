@@ -10,7 +10,7 @@ import imageio_ffmpeg
 import numpy as np
 import pytest
 
-from orthosim.errors import OrthosimError
+from orthosim import OrthosimError
 from orthosim.runtime.options import RenderOptions
 from orthosim_render.animation import render_run, tile
 from orthosim_bench.render import SyntheticMotion, run_bench

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from orthosim.errors import OrthosimError
+from orthosim import OrthosimError
 from orthosim.spheretree.tree import SphereTree
 from orthosim_render.spheretree_view import SPHERE_COLOR, render_sphere_tree
 from orthosim_render.standin import standin_dentition

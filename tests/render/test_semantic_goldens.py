@@ -31,19 +31,19 @@ GL = GoldenSidecar(gl_renderer="llvmpipe (test)", mesa_version="1.0")  # both si
 
 @pytest.fixture(scope="module")
 def dentition():
-    from orthosim.exchange.case import load_case
+    from orthosim import load_case
 
     return load_case(ROOT / "cases" / "normal_occlusion.toml").build_dentition()
 
 
 def draw(dentition, state, view):
     """(image, labels, the scene) of `state` from `view`, as a golden is drawn."""
-    from orthosim_render.regression import _renderer
+    from orthosim_render.frame import cached_renderer
     from orthosim_render.scene import DentitionScene
 
     scene = DentitionScene(dentition, SIZE)
     scene.update(state)
-    image, labels = render_labelled(_renderer(SIZE), scene, view)
+    image, labels = render_labelled(cached_renderer(SIZE), scene, view)
     return image, labels, scene
 
 
@@ -62,13 +62,13 @@ def expected_shift(scene, point: np.ndarray, move_mm: np.ndarray) -> tuple[float
 
 
 def test_the_label_pass_leaves_the_image_bit_identical_and_labels_every_drawn_pixel(dentition):
-    from orthosim_render.regression import _renderer
+    from orthosim_render.frame import cached_renderer
     from orthosim_render.scene import DentitionScene
 
     state = FrameState.rest(dentition)
     plain = DentitionScene(dentition, SIZE)
     plain.update(state)
-    image = _renderer(SIZE).render(plain, "frontal")
+    image = cached_renderer(SIZE).render(plain, "frontal")
     labelled, labels, _ = draw(dentition, state, "frontal")
     assert np.array_equal(image, labelled)
     background = np.all(image == image[0, 0], axis=2)
@@ -304,7 +304,7 @@ def test_on_real_teeth_a_moved_canine_and_a_removed_incisor_are_named_exactly():
     the parametric ones."""
     import warnings
 
-    from orthosim.exchange.case import load_case
+    from orthosim import load_case
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the scan's estimated axes and interpenetrations, said elsewhere

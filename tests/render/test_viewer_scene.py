@@ -21,7 +21,7 @@ from cli_helpers import orthosim
 from gltf_validator_helpers import errors_of, validate_glb
 from orthosim_render.gltf import quaternion_xyzw, read_glb, rotation_of_quaternion
 from orthosim_render.treatment_gltf import (CONTACT_MARKER_RADIUS_MM, MM, ContactMarker, SceneKeyframe,
-                                            keyframe_of_record, ContactLocator, treatment_glb)
+                                            ContactLocator, treatment_glb)
 
 ROOT = Path(__file__).resolve().parents[2]
 CASE3 = ROOT / "cases" / "case3_incisor_space_closure.toml"

@@ -119,7 +119,7 @@ def test_exported_glb_scene_puts_each_tooth_where_the_run_left_it(two_runs):
     mesh = scene.geometry[geometry]
     posed = trimesh.transform_points(mesh.vertices, T)
     # the exported tooth, posed, has the centroid of the run's final tooth
-    from orthosim.exchange.case import load_case
+    from orthosim import load_case
 
     dent = load_case(ROOT / "cases" / "case1_first_premolar_extraction.toml").build_dentition()
     expected = dent.teeth[16].world_mesh(np.array(metrics["teeth"]["16"]["final_pose"])).vertices.mean(axis=0)
@@ -132,7 +132,7 @@ def test_ply_export_writes_one_posed_tooth_per_file(short_case, tmp_path):
     run_one(short_case, tmp_path / "o", RunOptions(render=None, export_scene="ply", export_steps=(0,), verbosity=0))
     files = sorted((tmp_path / "o" / "scene" / "step_00000").glob("tooth_*.ply"))
     assert len(files) == 24  # 28 teeth less four extractions
-    from orthosim.exchange.case import load_case
+    from orthosim import load_case
 
     dent = load_case(short_case).build_dentition()
     mesh = trimesh.load(tmp_path / "o" / "scene" / "step_00000" / "tooth_11.ply")

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orthosim.exchange.case import load_case
+from orthosim import load_case
 from orthosim.movement.records import CollisionEvent, StepRecord
 
 ROOT = Path(__file__).resolve().parents[2]
