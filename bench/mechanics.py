@@ -190,6 +190,29 @@ def rotation_rows(tooth, mf_mm=MF_RANGE_MM) -> list[dict]:
     return rows
 
 
+def rotation_crossings(tooth) -> dict:
+    """M/F (mm) at which the centre of rotation reaches the apex (controlled tipping) and at which the
+    tooth translates (no tipping), for a lingual force at the bracket: roots of the tipping per mm of
+    travel, which is a smooth function of M/F."""
+    from scipy.optimize import brentq
+
+    s = _root_support(tooth, DEFAULT, DEFAULT.crest_below_cej_mm)
+    b, c = bracket_point(tooth), s.center_of_resistance
+    force = np.array([0.0, 0.0, -1.0])
+    unit = np.cross(b - c, force)
+    unit /= np.linalg.norm(unit)
+    to_apex = float(c[1] - tooth.apex[1])
+
+    def inverse_offset(mf: float) -> float:  # 1 / (mm of the centre of rotation apical of the centre)
+        t, w = s.motion(force, b, -unit * mf)
+        return float(np.cross(w, [0.0, 1.0, 0.0]) @ force) / float((t + np.cross(w, c)) @ force)
+
+    translation = brentq(inverse_offset, 0.0, 30.0)
+    apex = brentq(lambda mf: inverse_offset(mf) - 1.0 / to_apex, 0.0, translation)
+    return {"fdi": tooth.fdi, "controlled_tipping_mf_mm": apex, "translation_mf_mm": translation,
+            "bracket_to_cr_mm": float(b[1] - c[1]), "cr_to_apex_mm": to_apex}
+
+
 def rotation_class(apical_of_cr_mm: float, cr_to_apex_mm: float, apex_tolerance_mm: float = 1.5) -> str:
     """The classical movement a centre of rotation `apical_of_cr_mm` (mm apical of the centre of
     resistance) makes, for a tooth `cr_to_apex_mm` from centre to apex."""
@@ -333,7 +356,14 @@ def _markdown() -> str:
         parts += ["## Largest real tooth: ligament time", str(stiffness_timing(largest_tooth(real))), ""]
     prow = resistance_rows(parametric)
     parts += ["## Centre of resistance, parametric teeth", resistance_table(prow), "", molar_table(prow), ""]
-    parts += ["## Centre of rotation against M/F (lingual force at the bracket)", rotation_table(columns)]
+    parts += ["## Centre of rotation against M/F (lingual force at the bracket)", rotation_table(columns), ""]
+    teeth = [("parametric", parametric.teeth[11])] + ([] if real is None else [("real", real.teeth[11]), ("real", real.teeth[21])])
+    parts += ["| tooth | bracket to CR mm | CR to apex mm | M/F at the apex (controlled tipping) mm | M/F of translation mm |",
+              "|---|---|---|---|---|"]
+    for name, tooth in teeth:
+        x = rotation_crossings(tooth)
+        parts.append(f"| {name} {tooth.fdi} | {x['bracket_to_cr_mm']:.2f} | {x['cr_to_apex_mm']:.2f} | "
+                     f"{x['controlled_tipping_mf_mm']:.2f} | {x['translation_mf_mm']:.2f} |")
     return "\n".join(parts)
 
 

@@ -48,8 +48,8 @@ def ligament_motion(mech: ToothMechanics, pose: np.ndarray, force_cN: np.ndarray
         rate = law.rate(f, area)
         if wire == "rectangular" and translation_only:
             return Motion(C, np.asarray(force_cN, float) * (rate / f), np.zeros(3))
-        reference = np.linalg.solve(support.stiffness[:3, :3], F)  # F through the centre of resistance
-        along = float(reference @ F) / f
+        t0, w0 = support.motion(F, c)  # the same force through the centre of resistance
+        along = float((t0 + np.cross(w0, c)) @ F) / f
         scale = rate / along if along > 0 else 0.0
         t, w = support.motion(F, R.T @ (np.asarray(point, float) - p), M)
         return Motion(C, R @ ((t + np.cross(w, c)) * scale), R @ (w * scale))
