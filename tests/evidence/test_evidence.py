@@ -289,7 +289,8 @@ def test_the_shipped_canine_retraction_closes_the_space_and_the_molar_gives_what
     records = list(simulate(model, "continuous"))
     first, last = records[0], records[-1]
     moved = {t: float(np.linalg.norm(last.poses[t][:3, 3] - first.poses[t][:3, 3])) for t in (13, 16)}
-    assert any({13, 15} == set(p) for p in last.touching)  # the canine reached the second premolar
+    # the canine reached the second premolar (the premolar, pushed on by it, may give way again after)
+    assert any(any({13, 15} == set(p) for p in r.touching) for r in records)
     assert moved[13] > 5.0
     assert molar_mm[0] <= moved[16] <= molar_mm[1] + 1e-12, moved
 
