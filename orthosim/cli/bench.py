@@ -36,13 +36,15 @@ from orthosim.cli.options import gl_option, parse_size, select_gl
 @click.option("--labels", is_flag=True, help="Also time the label pass of semantic goldens against a golden's render.")
 @click.option("--closure", "closure_case", type=click.Path(path_type=Path), default=None,
               help="Also time this (real-jaw) case's step with and without the bite's closure.")
+@click.option("--no-mechanics", is_flag=True,
+              help="Skip the ligament's time on a 40k-triangle tooth and the step with it against the rule's.")
 @click.option("--no-backends", is_flag=True,
               help="Skip render_backends: render frames/s through each offscreen backend found, one process each.")
 @gl_option
 def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, markers: int, memory_frames: int,
           no_png: bool, no_simulate: bool, step_days: float, no_tree_build: bool, no_startup: bool,
           no_staging: bool, no_batch: bool, no_report: bool, report_runs: Path, no_memory: bool, labels: bool,
-          closure_case: Path | None, no_scan: bool, no_backends: bool, gl: str | None) -> None:
+          closure_case: Path | None, no_scan: bool, no_mechanics: bool, no_backends: bool, gl: str | None) -> None:
     """Measure throughput against the 40 fps target; write JSON.
 
     Simulation, each collision detector, rendering alone and end to end, in one run on one case.
@@ -66,6 +68,11 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
         from orthosim_bench.closure import closure_timings
 
         record["closure"] = guarded("closure", failures, lambda: closure_timings(closure_case))
+    if not no_mechanics:
+        from orthosim.exchange.case import DEFAULT_CASE
+        from orthosim_bench.mechanics import mechanics_timings
+
+        record["mechanics"] = guarded("mechanics", failures, lambda: mechanics_timings(case or DEFAULT_CASE))
     if not no_backends:  # after run_bench closed its renderer: each backend draws in a process of its own
         from orthosim.exchange.case import DEFAULT_CASE
         from orthosim_bench.backends import render_backends
@@ -76,6 +83,10 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
     write_json(out_file, record)
     for line in summary_lines(record, out_file):
         click.echo(line)
+    if record.get("mechanics"):
+        from orthosim_bench.mechanics import summary_line
+
+        click.echo(summary_line(record["mechanics"]))
     for failure in failures:  # every sub-run that failed or was refused, named, and the bench fails
         click.echo(failure.line(), err=True)
     if failures:

@@ -48,8 +48,11 @@ def _law(x) -> RateLaw:
 
 
 def _area(bench: EvidenceModels, law: RateLaw, fdi: int) -> float:
+    """mm^2 the rate law scales the tooth's force by, as the step does (`ToothMechanics.resisting_area_mm2`)
+    but with `law`'s bone factor: the root surface (embedded, over the reference root's embedded
+    share, when teeth move by their ligament) times the factor for a lower tooth."""
     mech = bench.mechanics("parametric", fdi)
-    return mech.root_area_mm2 * (law.mandibular_bone_factor if fdi // 10 in (3, 4) else 1.0)
+    return mech.root_area_mm2 / mech.reference_share * (law.mandibular_bone_factor if fdi // 10 in (3, 4) else 1.0)
 
 
 def closed_form(bench: EvidenceModels, law: RateLaw, row: EvidenceRow) -> float:

@@ -54,7 +54,7 @@ from orthosim.model.fdi import Arch
 from orthosim.mechanics.ratelaw import RateLaw
 from orthosim.model.tooth import ROOT, Tooth
 from orthosim.mechanics.resistance import center_of_resistance, tipping_center
-from orthosim.mechanics.ligament import DEFAULT as DEFAULT_LIGAMENT, LigamentProperties, RootSupport, root_support
+from orthosim.mechanics.ligament import DEFAULT as DEFAULT_LIGAMENT, EMBEDDED_SHARE_OF_REFERENCE, LigamentProperties, RootSupport, root_support
 
 # Tooth density for masses and inertias (mean of enamel, dentine and root): 2.2 g/cm^3 = 2.2e-3 g/mm^3.
 DENSITY_G_PER_MM3 = 2.2e-3
@@ -80,11 +80,16 @@ class ToothMechanics:
     inertia_g_mm2: np.ndarray  # (3, 3) g*mm^2 about the centre of mass, local axes
     bone_factor: float = 1.0  # the rate law's mandibular bone factor for a lower tooth, 1 for an upper one
     support: RootSupport | None = None  # the ligament (rule "ligament"): the step moves the tooth by its compliance
+    # the share of the rate law's reference root its area counts (`ligament.EMBEDDED_SHARE_OF_REFERENCE`
+    # for an embedded area; 1 for a whole root)
+    reference_share: float = 1.0
 
     @property
     def resisting_area_mm2(self) -> float:
-        """mm^2: the root surface the rate law scales the force by (root area times the bone factor)."""
-        return self.root_area_mm2 * self.bone_factor if self.bone_factor != 1.0 else self.root_area_mm2
+        """mm^2: the root surface the rate law scales the force by (root area times the bone factor; an
+        embedded area over the reference root's embedded share, so the reference premolar keeps its rate)."""
+        area = self.root_area_mm2 * self.bone_factor if self.bone_factor != 1.0 else self.root_area_mm2
+        return area / self.reference_share if self.reference_share != 1.0 else area
 
     @property
     def bracket_lever_mm(self) -> float:
@@ -144,7 +149,8 @@ def build_mechanics(tooth: Tooth, rule: str = "literature", fraction: float = 0.
         inertia = np.diag([ext[1] ** 2 + ext[2] ** 2, ext[0] ** 2 + ext[2] ** 2, ext[0] ** 2 + ext[1] ** 2]) * mass / 12
     bone = law.mandibular_bone_factor if law is not None and tooth.arch == LOWER else 1.0
     return ToothMechanics(tooth.fdi, cr, tipping_center(tooth), bracket, np.asarray(tooth.crown_center, float),
-                          np.asarray(tooth.apex, float), area, sigma2, mass, com, inertia, bone, support)
+                          np.asarray(tooth.apex, float), area, sigma2, mass, com, inertia, bone, support,
+                          EMBEDDED_SHARE_OF_REFERENCE if support is not None else 1.0)
 
 
 def _ligament_sigma2(support: RootSupport, bracket: np.ndarray) -> float:
@@ -153,8 +159,8 @@ def _ligament_sigma2(support: RootSupport, bracket: np.ndarray) -> float:
     bracket turns the tooth (so that `movement_type` names the ligament's motions)."""
     c = support.center_of_resistance
     d = float(bracket[1] - c[1])
-    cr = support.center_of_rotation(np.array([0.0, 0.0, -1.0]), bracket)
-    return max(d * float(c[1] - cr[1]), 1e-6) if np.isfinite(cr[1]) else 1e-6
+    y = support.center_of_rotation_on_axis(np.array([0.0, 0.0, -1.0]), bracket)
+    return max(d * float(c[1] - y), 1e-6) if np.isfinite(y) else 1e-6
 
 
 def center_of_rotation_offset(mech: ToothMechanics, m_over_f_mm: float) -> float:

@@ -61,6 +61,12 @@ RANGES: dict[str, tuple[float, float]] = {
     "thickness_mm": (0.15, 0.38),
     "crest_below_cej_mm": (0.4, 1.9),
 }
+# The rate law's reference root (`orthosim.mechanics.ratelaw`: 200 mm^2, a single-rooted premolar's
+# whole root surface) counted the way the ligament counts a root, apical of the healthy crest: the
+# parametric upper second premolar's embedded surface over its whole root surface (173.5 / 202.7 mm^2
+# with the crest 1.5 mm below the CEJ; 0.855-0.868 over the parametric types; a test recomputes it).
+# A rate law on embedded surfaces divides them by it, so the reference premolar keeps its rate.
+EMBEDDED_SHARE_OF_REFERENCE = 0.856
 
 
 @dataclass(frozen=True)
@@ -153,6 +159,19 @@ class RootSupport:
         c = self.center_of_resistance
         return axis_point + u * float((c - axis_point) @ u)
 
+    def center_of_rotation_on_axis(self, force_N, point_mm, couple_Nmm=0.0) -> float:
+        """mm, tooth frame y: the level, on the line through the centre of resistance along the long
+        axis, whose displacement along the force vanishes (the classical centre of rotation in the
+        plane of the force and the long axis); inf when the tooth does not tip in that plane."""
+        t, w = self.motion(force_N, point_mm, couple_Nmm)
+        c = self.center_of_resistance
+        d = np.asarray(force_N, float) / np.linalg.norm(force_N)
+        tip = float(np.cross(w, [0.0, 1.0, 0.0]) @ d)  # mm along d per mm up the axis
+        along = float((t + np.cross(w, c)) @ d)
+        if abs(tip) * 1e3 <= 1e-9 * abs(along):
+            return np.inf
+        return float(c[1] - along / tip)
+
     def translation_at(self, point_mm, translation_mm, rotation_rad) -> np.ndarray:
         """(3,) mm: how far the tooth-frame point point_mm moves under a motion from `motion`."""
         return np.asarray(translation_mm, float) + np.cross(rotation_rad, np.asarray(point_mm, float))
@@ -172,13 +191,15 @@ def stiffness_of_faces(centers: np.ndarray, normals: np.ndarray, areas: np.ndarr
     a = np.asarray(areas, float)
     n = np.asarray(normals, float)
     r = np.asarray(centers, float)
-    nn = np.einsum("i,ij,ik->jk", a, n, n)
-    A = ks * a.sum() * np.eye(3) + (kn - ks) * nn
-    # sum over faces of [r]x K_i and [r]x K_i [r]x^T, K_i = a (ks I + (kn - ks) n n^T), without (n, 3, 3) arrays
+    # sums over faces of a n n^T, a (r x n) n^T, a (r x n)(r x n)^T and a r r^T as matrix products
+    # (BLAS), without (n, 3, 3) arrays; K_i = a (ks I + (kn - ks) n n^T)
     rn = np.cross(r, n)
-    B = ks * skew(np.einsum("i,ij->j", a, r)) + (kn - ks) * np.einsum("i,ij,ik->jk", a, rn, n)
-    rr = np.einsum("i,ij,ik->jk", a, r, r)
-    D = ks * (np.trace(rr) * np.eye(3) - rr) + (kn - ks) * np.einsum("i,ij,ik->jk", a, rn, rn)
+    an, ar = a[:, None] * n, a[:, None] * r
+    nn, rnn = an.T @ n, (a[:, None] * rn).T @ n
+    rr, rnrn = ar.T @ r, (a[:, None] * rn).T @ rn
+    A = ks * a.sum() * np.eye(3) + (kn - ks) * nn
+    B = ks * skew(ar.sum(axis=0)) + (kn - ks) * rnn
+    D = ks * (np.trace(rr) * np.eye(3) - rr) + (kn - ks) * rnrn
     K = np.empty((6, 6))
     K[:3, :3], K[3:, :3], K[:3, 3:], K[3:, 3:] = A, B, B.T, D
     return K

@@ -9,9 +9,9 @@ move that centre at rate(|F|, embedded area) along F (`orthosim.mechanics.ratela
 M/F table is not written in anywhere: where the tooth turns follows from the root's geometry.
 
 Wires (the paper's set-up, with the ligament in place of the rules):
-  rectangular + a bodily load: the wire holds the tooth's rotation; the tooth translates along the
-      translational compliance A^-1 F (along F for a force on a principal axis of the root), at the
-      rate law's speed along F;
+  rectangular + a bodily load: the wire in the slot holds the tooth's rotation and every
+      translation but the one along F (sliding mechanics); the tooth translates along F at the rate
+      law's speed on its embedded root surface (the ligament's compliance across F is taken by the wire);
   rectangular + force with a couple, and round + force (or couple): the force system as it stands,
       free of the wire's moment;
   rectangular + a couple alone: the wire holds the bracket, the tooth turns about it with the
@@ -45,11 +45,12 @@ def ligament_motion(mech: ToothMechanics, pose: np.ndarray, force_cN: np.ndarray
     f = length(F)
     area = mech.resisting_area_mm2
     if f > 0:
-        reference = np.linalg.solve(support.stiffness[:3, :3], F)  # F through the centre of resistance
-        along = float(reference @ F) / f
-        scale = law.rate(f, area) / along if along > 0 else 0.0
+        rate = law.rate(f, area)
         if wire == "rectangular" and translation_only:
-            return Motion(C, R @ (reference * scale), np.zeros(3))
+            return Motion(C, np.asarray(force_cN, float) * (rate / f), np.zeros(3))
+        t0, w0 = support.motion(F, c)  # the same force through the centre of resistance
+        along = float((t0 + np.cross(w0, c)) @ F) / f
+        scale = rate / along if along > 0 else 0.0
         t, w = support.motion(F, R.T @ (np.asarray(point, float) - p), M)
         return Motion(C, R @ ((t + np.cross(w, c)) * scale), R @ (w * scale))
     m = length(M)

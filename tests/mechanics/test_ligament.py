@@ -113,3 +113,13 @@ def test_every_real_tooth_has_its_centre_of_resistance_on_its_embedded_root():
         assert tooth.apex[1] < c[1] < -DEFAULT.crest_below_cej_mm, n
         assert np.hypot(c[0], c[2]) < 2.5, n  # near the long axis
         assert s.resistance_residual_mm < 0.25 * tooth.root_length, n
+
+
+def test_the_reference_premolars_embedded_share_is_the_one_the_rate_law_counts():
+    from orthosim.mechanics.ligament import EMBEDDED_SHARE_OF_REFERENCE
+    from orthosim.model.parametric import parametric_dentition
+    from orthosim.model.tooth import ROOT
+
+    premolar = parametric_dentition("smooth").teeth[15]
+    whole = premolar.mesh.area_faces[premolar.face_part == ROOT].sum()
+    assert root_support(premolar).embedded_area_mm2 / whole == pytest.approx(EMBEDDED_SHARE_OF_REFERENCE, abs=0.001)
