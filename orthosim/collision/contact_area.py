@@ -84,6 +84,33 @@ def triangle_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return best
 
 
+def _pairs_within(points: np.ndarray, tree: cKDTree, reach_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """(index into `points` (n, 3), index into `tree`'s points) of every pair within `reach_mm`, as arrays."""
+    if not len(points):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    found = cKDTree(points).sparse_distance_matrix(tree, reach_mm, output_type="ndarray")
+    return found["i"].astype(np.int64), found["j"].astype(np.int64)
+
+
+def _across_planes(tri: np.ndarray, tri_normals: np.ndarray, mine: np.ndarray, theirs: np.ndarray,
+                   other: "ContactSurface", tolerance_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (`mine` into `tri` (k, 3, 3) with unit normals `tri_normals` (k, 3), `theirs` faces
+    of `other`, all in `other`'s frame) that may lie within `tolerance_mm`: a pair is left out when
+    the three corners of one triangle lie on one side of the other's plane, farther than the
+    tolerance from it, for then so is every point of the triangle (a blend of its corners). A
+    degenerate triangle (normal 0) leaves its pairs in."""
+    if not len(mine):
+        return mine, theirs
+    slack = tolerance_mm + 1e-9  # mm: rounding
+    a = tri[mine]
+    b = other.vertices[other.faces[theirs]]
+    far = np.zeros(len(mine), bool)
+    for corners, plane_point, normal in ((a, b[:, 0], other.normals[theirs]), (b, a[:, 0], tri_normals[mine])):
+        height = np.einsum("ijk,ik->ij", corners - plane_point[:, None, :], normal)
+        far |= (height.min(axis=1) > slack) | (height.max(axis=1) < -slack)
+    return mine[~far], theirs[~far]
+
+
 class ContactSurface:
     """One tooth's mesh prepared for contact-area queries (built once per tooth, mm, local frame)."""
 
@@ -94,6 +121,9 @@ class ContactSurface:
         self.centroids = tri.mean(axis=1)
         self.circumradius = np.linalg.norm(tri - self.centroids[:, None, :], axis=2).max(axis=1)  # about the centroid
         self.kdtree = cKDTree(self.centroids)
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        length = np.linalg.norm(cross, axis=1)
+        self.normals = np.where(length[:, None] > 0, cross / np.where(length > 0, length, 1.0)[:, None], 0.0)  # unit, or 0
         self.center = self.vertices.mean(axis=0)  # a sphere (center, radius mm) holding every vertex
         self.radius = float(np.linalg.norm(self.vertices - self.center, axis=1).max())
         self._solid: Solid | None = None
@@ -115,8 +145,17 @@ class ContactSurface:
         tri = self.vertices[self.faces[candidates]] @ to_other[:3, :3].T + to_other[:3, 3]
         centre = tri.mean(axis=1)
         mine, theirs = self._near_pairs(candidates, centre, other, tolerance_mm)
+        mine, theirs = _across_planes(tri, self.normals[candidates] @ to_other[:3, :3].T, mine, theirs, other,
+                                      tolerance_mm)
         keep = np.zeros(len(candidates), bool)
         if len(mine):
+            # corners within the tolerance settle a face (the triangles are no farther apart than
+            # their corners; 1e-9 mm for rounding), and its other pairs need no exact distance
+            gap = tri[mine][:, :, None, :] - other.vertices[other.faces[theirs]][:, None, :, :]
+            corner = np.einsum("ijkl,ijkl->ijk", gap, gap).min(axis=(1, 2))
+            keep[mine[corner <= (tolerance_mm - 1e-9) ** 2]] = True
+            left = ~keep[mine]
+            mine, theirs = mine[left], theirs[left]
             d = triangle_distances(tri[mine], other.vertices[other.faces[theirs]])
             keep[np.unique(mine[d <= tolerance_mm])] = True
         rest = np.flatnonzero(~keep)
@@ -131,14 +170,10 @@ class ContactSurface:
         both circumradii and the tolerance, as every point of a triangle lies within its circumradius
         of its centroid. The pairs left out cannot touch, so the kept faces are those of every pair."""
         radius = self.circumradius[candidates]
-        lists = other.kdtree.query_ball_point(centre, radius + other.circumradius.max() + tolerance_mm)
-        counts = np.fromiter((len(x) for x in lists), np.int64, len(lists))
-        if not counts.sum():
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        mine = np.repeat(np.arange(len(candidates)), counts)
-        theirs = np.concatenate([np.asarray(x, np.int64) for x in lists if len(x)])
+        reach = radius.max() + other.circumradius.max() + tolerance_mm + 1e-9  # 1e-9 mm: rounding
+        mine, theirs = _pairs_within(centre, other.kdtree, reach)
         gap = centre[mine] - other.centroids[theirs]
-        reach = radius[mine] + other.circumradius[theirs] + tolerance_mm + 1e-9  # 1e-9 mm: rounding
+        reach = radius[mine] + other.circumradius[theirs] + tolerance_mm + 1e-9
         near = np.einsum("ij,ij->i", gap, gap) <= reach * reach
         return mine[near], theirs[near]
 
