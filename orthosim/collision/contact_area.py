@@ -8,8 +8,9 @@ tolerance, or when the triangle's centroid lies inside the other tooth (teeth pu
 other: the deepest part of an overlap is farther than the tolerance from the other surface yet
 plainly in contact).
 
-The triangle distance is written here (vectorised numpy) because FCL answers one closest pair per
-query, not a distance per triangle. Distances in mm; poses (4, 4) local -> arch frame.
+The triangle distance is written here (vectorised numpy, and compiled with an early stop per
+triangle in `trianglepairs`, which the faces are found with) because FCL answers one closest pair
+per query, not a distance per triangle. Distances in mm; poses (4, 4) local -> arch frame.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
+from orthosim.collision.trianglepairs import faces_within
 from orthosim.spheretree.inside import Solid
 
 TOUCH_TOLERANCE_MM = 0.05  # as near as the model's neighbours are placed to touch (see the README)
@@ -92,25 +94,6 @@ def _pairs_within(points: np.ndarray, tree: cKDTree, reach_mm: float) -> tuple[n
     return found["i"].astype(np.int64), found["j"].astype(np.int64)
 
 
-def _across_planes(tri: np.ndarray, tri_normals: np.ndarray, mine: np.ndarray, theirs: np.ndarray,
-                   other: "ContactSurface", tolerance_mm: float) -> tuple[np.ndarray, np.ndarray]:
-    """The pairs (`mine` into `tri` (k, 3, 3) with unit normals `tri_normals` (k, 3), `theirs` faces
-    of `other`, all in `other`'s frame) that may lie within `tolerance_mm`: a pair is left out when
-    the three corners of one triangle lie on one side of the other's plane, farther than the
-    tolerance from it, for then so is every point of the triangle (a blend of its corners). A
-    degenerate triangle (normal 0) leaves its pairs in."""
-    if not len(mine):
-        return mine, theirs
-    slack = tolerance_mm + 1e-9  # mm: rounding
-    a = tri[mine]
-    b = other.vertices[other.faces[theirs]]
-    far = np.zeros(len(mine), bool)
-    for corners, plane_point, normal in ((a, b[:, 0], other.normals[theirs]), (b, a[:, 0], tri_normals[mine])):
-        height = np.einsum("ijk,ik->ij", corners - plane_point[:, None, :], normal)
-        far |= (height.min(axis=1) > slack) | (height.max(axis=1) < -slack)
-    return mine[~far], theirs[~far]
-
-
 class ContactSurface:
     """One tooth's mesh prepared for contact-area queries (built once per tooth, mm, local frame)."""
 
@@ -118,6 +101,7 @@ class ContactSurface:
         self.vertices = np.asarray(vertices, float)
         self.faces = np.asarray(faces, np.int64)
         tri = self.vertices[self.faces]
+        self.triangles = np.ascontiguousarray(tri)
         self.centroids = tri.mean(axis=1)
         self.circumradius = np.linalg.norm(tri - self.centroids[:, None, :], axis=2).max(axis=1)  # about the centroid
         self.kdtree = cKDTree(self.centroids)
@@ -145,19 +129,11 @@ class ContactSurface:
         tri = self.vertices[self.faces[candidates]] @ to_other[:3, :3].T + to_other[:3, 3]
         centre = tri.mean(axis=1)
         mine, theirs = self._near_pairs(candidates, centre, other, tolerance_mm)
-        mine, theirs = _across_planes(tri, self.normals[candidates] @ to_other[:3, :3].T, mine, theirs, other,
-                                      tolerance_mm)
-        keep = np.zeros(len(candidates), bool)
-        if len(mine):
-            # corners within the tolerance settle a face (the triangles are no farther apart than
-            # their corners; 1e-9 mm for rounding), and its other pairs need no exact distance
-            gap = tri[mine][:, :, None, :] - other.vertices[other.faces[theirs]][:, None, :, :]
-            corner = np.einsum("ijkl,ijkl->ijk", gap, gap).min(axis=(1, 2))
-            keep[mine[corner <= (tolerance_mm - 1e-9) ** 2]] = True
-            left = ~keep[mine]
-            mine, theirs = mine[left], theirs[left]
-            d = triangle_distances(tri[mine], other.vertices[other.faces[theirs]])
-            keep[np.unique(mine[d <= tolerance_mm])] = True
+        order = np.argsort(mine, kind="stable")
+        offsets = np.zeros(len(candidates) + 1, np.int64)
+        np.cumsum(np.bincount(mine, minlength=len(candidates)), out=offsets[1:])
+        keep = faces_within(tri, np.ascontiguousarray(self.normals[candidates] @ to_other[:3, :3].T), offsets,
+                            theirs[order], other.triangles, other.normals, float(tolerance_mm))
         rest = np.flatnonzero(~keep)
         if len(rest):
             keep[rest[other.solid.contains(centre[rest])]] = True
