@@ -108,6 +108,7 @@ class ContactSurface:
         cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         length = np.linalg.norm(cross, axis=1)
         self.normals = np.where(length[:, None] > 0, cross / np.where(length > 0, length, 1.0)[:, None], 0.0)  # unit, or 0
+        self.low, self.high = self.vertices.min(axis=0), self.vertices.max(axis=0)  # box of the mesh, mm
         self.center = self.vertices.mean(axis=0)  # a sphere (center, radius mm) holding every vertex
         self.radius = float(np.linalg.norm(self.vertices - self.center, axis=1).max())
         self._solid: Solid | None = None
@@ -146,6 +147,20 @@ class ContactSurface:
         both circumradii and the tolerance, as every point of a triangle lies within its circumradius
         of its centroid. The pairs left out cannot touch, so the kept faces are those of every pair."""
         radius = self.circumradius[candidates]
+        # a triangle within the tolerance of `other` has its centroid near `other`'s box (its frame)
+        margin = (radius + tolerance_mm + 1e-9)[:, None]
+        boxed = np.flatnonzero(np.all((centre >= other.low - margin) & (centre <= other.high + margin), axis=1))
+        if not len(boxed):
+            return boxed, boxed
+        mine, theirs = self._pairs_near(boxed, radius, centre, other, tolerance_mm)
+        return boxed[mine], theirs
+
+    @staticmethod
+    def _pairs_near(boxed: np.ndarray, radius: np.ndarray, centre: np.ndarray, other: "ContactSurface",
+                    tolerance_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        """`_near_pairs` for the candidates `boxed` (indices into `radius` (mm) and `centre`): (index
+        into boxed, face of other)."""
+        radius, centre = radius[boxed], centre[boxed]
         reach = radius.max() + other.circumradius.max() + tolerance_mm + 1e-9  # 1e-9 mm: rounding
         mine, theirs = _pairs_within(centre, other.kdtree, reach)
         gap = centre[mine] - other.centroids[theirs]
@@ -165,8 +180,10 @@ def faces_in_spheres(surface: ContactSurface, pose: np.ndarray, centers: np.ndar
     """Faces (sorted indices) with all three vertices inside one of the spheres (arch frame, mm): the
     triangles an overlapping leaf sphere holds, as a tree's leaf holds whole triangles."""
     pose = np.asarray(pose, float)
-    local = (np.asarray(centers, float).reshape(-1, 3) - pose[:3, 3]) @ pose[:3, :3]
-    radii = np.asarray(radii, float).reshape(-1)
+    # a step lists a leaf sphere once per leaf of the other tooth it overlaps: each sphere asked once
+    spheres = np.unique(np.column_stack([np.asarray(centers, float).reshape(-1, 3), np.asarray(radii, float).reshape(-1)]), axis=0)
+    local = (spheres[:, :3] - pose[:3, 3]) @ pose[:3, :3]
+    radii = spheres[:, 3]
     reach = radii + surface.radius + 1e-6  # a sphere that holds a face reaches the sphere holding the mesh
     gap = local - surface.center
     near = np.einsum("ij,ij->i", gap, gap) <= reach * reach
