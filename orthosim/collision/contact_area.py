@@ -20,7 +20,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from orthosim.collision.trianglepairs import faces_within
-from orthosim.spheretree.inside import Solid
+from orthosim.spheretree.inside import CrossingIndex
 
 TOUCH_TOLERANCE_MM = 0.05  # as near as the model's neighbours are placed to touch (see the README)
 
@@ -111,13 +111,15 @@ class ContactSurface:
         self.low, self.high = self.vertices.min(axis=0), self.vertices.max(axis=0)  # box of the mesh, mm
         self.center = self.vertices.mean(axis=0)  # a sphere (center, radius mm) holding every vertex
         self.radius = float(np.linalg.norm(self.vertices - self.center, axis=1).max())
-        self._solid: Solid | None = None
+        self._crossings: CrossingIndex | None = None
 
-    @property
-    def solid(self) -> Solid:
-        if self._solid is None:
-            self._solid = Solid(self.vertices, self.faces)
-        return self._solid
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """(p, 3) points in this mesh's frame, mm -> (p,) bool: inside the closed mesh. By ray crossings
+        (`CrossingIndex`, built on first use, a tenth of a second): a frame asks a few thousand points,
+        too few to pay for `Solid`'s voxel grid (seconds a crown)."""
+        if self._crossings is None:
+            self._crossings = CrossingIndex(self.vertices, self.faces)
+        return self._crossings.contains_exact(points)
 
     def faces_touching(self, candidates: np.ndarray, pose: np.ndarray, other: "ContactSurface", other_pose: np.ndarray,
                        tolerance_mm: float = TOUCH_TOLERANCE_MM) -> np.ndarray:
@@ -137,7 +139,7 @@ class ContactSurface:
                             theirs[order], other.triangles, other.normals, float(tolerance_mm))
         rest = np.flatnonzero(~keep)
         if len(rest):
-            keep[rest[other.solid.contains(centre[rest])]] = True
+            keep[rest[other.contains(centre[rest])]] = True
         return candidates[keep]
 
     def _near_pairs(self, candidates: np.ndarray, centre: np.ndarray, other: "ContactSurface",

@@ -9,12 +9,14 @@ import pytest
 
 from orthosim.collision.contact_area import TOUCH_TOLERANCE_MM, ContactSurface, faces_in_spheres, triangle_distances
 from orthosim.exchange.case import load_case
+from orthosim.spheretree.inside import Solid
 from orthosim.runtime.strategies import step_records
 
 from orthosim_render.contact_faces import ExactContactFaces
 from orthosim_render.timeline import frames_from_steps
 
 CASES = Path(__file__).resolve().parents[2] / "cases"
+_SOLIDS: dict[int, Solid] = {}
 
 
 def _touching_afresh(surface: ContactSurface, pose, candidates, other: ContactSurface, other_pose) -> set[int]:
@@ -29,7 +31,9 @@ def _touching_afresh(surface: ContactSurface, pose, candidates, other: ContactSu
     theirs = np.asarray([j for x in lists for j in x], np.int64)
     near = triangle_distances(tri[mine], other.triangles[theirs]) <= TOUCH_TOLERANCE_MM
     found = {int(c) for c in candidates[np.unique(mine[near])]}
-    inside = other.solid.contains(centre)
+    if id(other) not in _SOLIDS:
+        _SOLIDS[id(other)] = Solid(other.vertices, other.faces)  # the voxel-grid inside test, not the surface's own
+    inside = _SOLIDS[id(other)].contains(centre)
     return found | {int(c) for c in candidates[inside]}
 
 
