@@ -9,7 +9,7 @@ capabilities), `model` (what never changes), `broadphase` (which pairs to test),
 tree descent) and `descent_compiled` (its numba form), `time_of_contact` (Eq. 2 and step bounds),
 `queries` (a run's exact answers on the meshes, through `orthosim.geometry.meshquery`), `detect`
 (the entry points: `detect_step`, `contacts`), `contact_area` (the exact contact faces inside
-overlapping leaves), `interpenetration` (what a model's teeth overlap at rest), `validate`
+overlapping leaves) and `trianglepairs` (its compiled test of triangle pairs within a distance), `interpenetration` (what a model's teeth overlap at rest), `validate`
 (accuracy studies). How a tooth moves within a step (the motion every detector assumes) is
 `orthosim.geometry.motion`; the detector timings are `orthosim_bench.collision`.
 """

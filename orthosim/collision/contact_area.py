@@ -8,8 +8,9 @@ tolerance, or when the triangle's centroid lies inside the other tooth (teeth pu
 other: the deepest part of an overlap is farther than the tolerance from the other surface yet
 plainly in contact).
 
-The triangle distance is written here (vectorised numpy) because FCL answers one closest pair per
-query, not a distance per triangle. Distances in mm; poses (4, 4) local -> arch frame.
+The triangle distance is written here (vectorised numpy, and compiled with an early stop per
+triangle in `trianglepairs`, which the faces are found with) because FCL answers one closest pair
+per query, not a distance per triangle. Distances in mm; poses (4, 4) local -> arch frame.
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from orthosim.spheretree.inside import Solid
+from orthosim.collision.trianglepairs import faces_within
+from orthosim.spheretree.inside import CrossingIndex
 
 TOUCH_TOLERANCE_MM = 0.05  # as near as the model's neighbours are placed to touch (see the README)
 
@@ -84,6 +86,14 @@ def triangle_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return best
 
 
+def _pairs_within(points: np.ndarray, tree: cKDTree, reach_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """(index into `points` (n, 3), index into `tree`'s points) of every pair within `reach_mm`, as arrays."""
+    if not len(points):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    found = cKDTree(points).sparse_distance_matrix(tree, reach_mm, output_type="ndarray")
+    return found["i"].astype(np.int64), found["j"].astype(np.int64)
+
+
 class ContactSurface:
     """One tooth's mesh prepared for contact-area queries (built once per tooth, mm, local frame)."""
 
@@ -91,18 +101,25 @@ class ContactSurface:
         self.vertices = np.asarray(vertices, float)
         self.faces = np.asarray(faces, np.int64)
         tri = self.vertices[self.faces]
+        self.triangles = np.ascontiguousarray(tri)
         self.centroids = tri.mean(axis=1)
         self.circumradius = np.linalg.norm(tri - self.centroids[:, None, :], axis=2).max(axis=1)  # about the centroid
         self.kdtree = cKDTree(self.centroids)
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        length = np.linalg.norm(cross, axis=1)
+        self.normals = np.where(length[:, None] > 0, cross / np.where(length > 0, length, 1.0)[:, None], 0.0)  # unit, or 0
+        self.low, self.high = self.vertices.min(axis=0), self.vertices.max(axis=0)  # box of the mesh, mm
         self.center = self.vertices.mean(axis=0)  # a sphere (center, radius mm) holding every vertex
         self.radius = float(np.linalg.norm(self.vertices - self.center, axis=1).max())
-        self._solid: Solid | None = None
+        self._crossings: CrossingIndex | None = None
 
-    @property
-    def solid(self) -> Solid:
-        if self._solid is None:
-            self._solid = Solid(self.vertices, self.faces)
-        return self._solid
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """(p, 3) points in this mesh's frame, mm -> (p,) bool: inside the closed mesh. By ray crossings
+        (`CrossingIndex`, built on first use, a tenth of a second): a frame asks a few thousand points,
+        too few to pay for `Solid`'s voxel grid (seconds a crown)."""
+        if self._crossings is None:
+            self._crossings = CrossingIndex(self.vertices, self.faces)
+        return self._crossings.contains_exact(points)
 
     def faces_touching(self, candidates: np.ndarray, pose: np.ndarray, other: "ContactSurface", other_pose: np.ndarray,
                        tolerance_mm: float = TOUCH_TOLERANCE_MM) -> np.ndarray:
@@ -115,13 +132,14 @@ class ContactSurface:
         tri = self.vertices[self.faces[candidates]] @ to_other[:3, :3].T + to_other[:3, 3]
         centre = tri.mean(axis=1)
         mine, theirs = self._near_pairs(candidates, centre, other, tolerance_mm)
-        keep = np.zeros(len(candidates), bool)
-        if len(mine):
-            d = triangle_distances(tri[mine], other.vertices[other.faces[theirs]])
-            keep[np.unique(mine[d <= tolerance_mm])] = True
+        order = np.argsort(mine, kind="stable")
+        offsets = np.zeros(len(candidates) + 1, np.int64)
+        np.cumsum(np.bincount(mine, minlength=len(candidates)), out=offsets[1:])
+        keep = faces_within(tri, np.ascontiguousarray(self.normals[candidates] @ to_other[:3, :3].T), offsets,
+                            theirs[order], other.triangles, other.normals, float(tolerance_mm))
         rest = np.flatnonzero(~keep)
         if len(rest):
-            keep[rest[other.solid.contains(centre[rest])]] = True
+            keep[rest[other.contains(centre[rest])]] = True
         return candidates[keep]
 
     def _near_pairs(self, candidates: np.ndarray, centre: np.ndarray, other: "ContactSurface",
@@ -131,14 +149,24 @@ class ContactSurface:
         both circumradii and the tolerance, as every point of a triangle lies within its circumradius
         of its centroid. The pairs left out cannot touch, so the kept faces are those of every pair."""
         radius = self.circumradius[candidates]
-        lists = other.kdtree.query_ball_point(centre, radius + other.circumradius.max() + tolerance_mm)
-        counts = np.fromiter((len(x) for x in lists), np.int64, len(lists))
-        if not counts.sum():
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        mine = np.repeat(np.arange(len(candidates)), counts)
-        theirs = np.concatenate([np.asarray(x, np.int64) for x in lists if len(x)])
+        # a triangle within the tolerance of `other` has its centroid near `other`'s box (its frame)
+        margin = (radius + tolerance_mm + 1e-9)[:, None]
+        boxed = np.flatnonzero(np.all((centre >= other.low - margin) & (centre <= other.high + margin), axis=1))
+        if not len(boxed):
+            return boxed, boxed
+        mine, theirs = self._pairs_near(boxed, radius, centre, other, tolerance_mm)
+        return boxed[mine], theirs
+
+    @staticmethod
+    def _pairs_near(boxed: np.ndarray, radius: np.ndarray, centre: np.ndarray, other: "ContactSurface",
+                    tolerance_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        """`_near_pairs` for the candidates `boxed` (indices into `radius` (mm) and `centre`): (index
+        into boxed, face of other)."""
+        radius, centre = radius[boxed], centre[boxed]
+        reach = radius.max() + other.circumradius.max() + tolerance_mm + 1e-9  # 1e-9 mm: rounding
+        mine, theirs = _pairs_within(centre, other.kdtree, reach)
         gap = centre[mine] - other.centroids[theirs]
-        reach = radius[mine] + other.circumradius[theirs] + tolerance_mm + 1e-9  # 1e-9 mm: rounding
+        reach = radius[mine] + other.circumradius[theirs] + tolerance_mm + 1e-9
         near = np.einsum("ij,ij->i", gap, gap) <= reach * reach
         return mine[near], theirs[near]
 
@@ -154,8 +182,10 @@ def faces_in_spheres(surface: ContactSurface, pose: np.ndarray, centers: np.ndar
     """Faces (sorted indices) with all three vertices inside one of the spheres (arch frame, mm): the
     triangles an overlapping leaf sphere holds, as a tree's leaf holds whole triangles."""
     pose = np.asarray(pose, float)
-    local = (np.asarray(centers, float).reshape(-1, 3) - pose[:3, 3]) @ pose[:3, :3]
-    radii = np.asarray(radii, float).reshape(-1)
+    # a step lists a leaf sphere once per leaf of the other tooth it overlaps: each sphere asked once
+    spheres = np.unique(np.column_stack([np.asarray(centers, float).reshape(-1, 3), np.asarray(radii, float).reshape(-1)]), axis=0)
+    local = (spheres[:, :3] - pose[:3, 3]) @ pose[:3, :3]
+    radii = spheres[:, 3]
     reach = radii + surface.radius + 1e-6  # a sphere that holds a face reaches the sphere holding the mesh
     gap = local - surface.center
     near = np.einsum("ij,ij->i", gap, gap) <= reach * reach
