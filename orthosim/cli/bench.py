@@ -68,13 +68,13 @@ def bench(case: Path | None, out_file: Path, size, frames: int, warmup: int, mar
         from orthosim_bench.closure import closure_timings
 
         record["closure"] = guarded("closure", failures, lambda: closure_timings(closure_case))
+    from orthosim.exchange.case import DEFAULT_CASE
+
     if not no_mechanics:
-        from orthosim.exchange.case import DEFAULT_CASE
         from orthosim_bench.mechanics import mechanics_timings
 
         record["mechanics"] = guarded("mechanics", failures, lambda: mechanics_timings(case or DEFAULT_CASE))
     if not no_backends:  # after run_bench closed its renderer: each backend draws in a process of its own
-        from orthosim.exchange.case import DEFAULT_CASE
         from orthosim_bench.backends import render_backends
 
         record["render_backends"] = guarded("render_backends", failures, lambda: render_backends(
