@@ -13,7 +13,18 @@ import sys
 import time
 from pathlib import Path
 
-import pytest
+# The step guard and the goldens are bit-exact, so the suite computes with the same arithmetic on
+# every x86-64 machine: numpy's AVX-512 loops (exp, log, ...) round differently from the libm path
+# other CPUs take (numpy issue #23523), and OpenBLAS picks its kernels (and so its summation order)
+# by CPU. Off AVX-512 and on OpenBLAS's Haswell kernels, an AVX-512 machine computes as an AVX2 one.
+# Set before numpy loads (dev.sh test exports the same); child processes inherit them.
+REFERENCE_ARITHMETIC = {"NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512F AVX512CD AVX512_SKX AVX512_CLX AVX512_CNL "
+                                                    "AVX512_ICL AVX512_SPR",
+                        "OPENBLAS_CORETYPE": "Haswell"}
+for _name, _value in REFERENCE_ARITHMETIC.items():
+    os.environ.setdefault(_name, _value)
+
+import pytest  # noqa: E402
 
 from orthosim.exchange.shareddata import OPEN_FULL_JAW, shared_data_dir
 from orthosim_render.offscreen_backend import ENV, probe_osmesa

@@ -63,6 +63,9 @@ case "$action" in
     install) echo "dev.sh: installed; run .venv/bin/orthosim --help" ;;
     demo) exec .venv/bin/orthosim demo "$@" ;;
     # pytest-xdist: one worker per core, each module on one worker (its module-wide set-ups built once)
-    test) exec .venv/bin/python -m pytest -n auto --dist loadscope "$@" ;;
+    # the same arithmetic on every x86-64 machine for the bit-exact step guard and goldens (tests/conftest.py)
+    test) export NPY_DISABLE_CPU_FEATURES="${NPY_DISABLE_CPU_FEATURES-X86_V4 AVX512F AVX512CD AVX512_SKX AVX512_CLX AVX512_CNL AVX512_ICL AVX512_SPR}"
+          export OPENBLAS_CORETYPE="${OPENBLAS_CORETYPE-Haswell}"
+          exec .venv/bin/python -m pytest -n auto --dist loadscope "$@" ;;
     *) echo "dev.sh: unknown action '$action' (use demo, test or install)" >&2; exit 2 ;;
 esac
