@@ -284,9 +284,9 @@ def spread_rows(real_case_path, folder) -> list[dict]:
     rows = []
     for n in sorted(int(k) for k in real["teeth"]):
         r, e = real["teeth"][str(n)], est["teeth"].get(str(n))
-        if e is None or max(r["moved_mm"], e["moved_mm"]) < 0.01:
+        if e is None or "moved_mm_range" not in e:  # not a moving tooth (a lower one the hinge only carries)
             continue
-        low, high = e.get("moved_mm_range", [e["moved_mm"], e["moved_mm"]])
+        low, high = e["moved_mm_range"]
         rows.append({"fdi": n, "real_mm": r["moved_mm"], "estimated_mm": e["moved_mm"], "low_mm": low, "high_mm": high,
                      "inside": low - 1e-6 <= r["moved_mm"] <= high + 1e-6})
     return rows

@@ -220,8 +220,7 @@ class RunReport:
         (`orthosim.movement.rootspread`, which simulates the spread's two ends: worked out once) and
         metrics.json's "root_spread"; {} when every root was seen."""
         if self._spread is None:
-            moved = {int(n): v["moved_mm"] for n, v in teeth.items()}
-            self._spread = moved_ranges(self.model, self.detector, self.last.step, moved)
+            self._spread = moved_ranges(self.model, self.detector, self.last.step, self.first, self.last)
         if not self._spread:
             return {}
         for n, (low, high) in self._spread.items():

@@ -59,31 +59,40 @@ def spread_model(model: MovementModel, factor: float) -> MovementModel:
     return replace(model, mechanics=mech)
 
 
-def crown_moves(model: MovementModel, first_poses, last_poses) -> dict[int, float]:
-    """FDI -> mm its crown centre moved from `first_poses` to `last_poses` (arch frame)."""
-    out = {}
+def crown_moves(model: MovementModel, first, last) -> tuple[dict[int, float], dict[int, float]]:
+    """(FDI -> mm its crown centre moved from the record `first` to `last`, arch frame, as metrics.json's
+    `moved_mm`; FDI -> mm it moved within its own jaw: a lower tooth's with the mandible's hinge turn
+    taken out when the run closes the bite)."""
+    undo = None
+    if model.closure is not None and last.bite is not None:
+        undo = model.closure.axis.transform(-last.bite.angle_deg)
+    moved, own = {}, {}
     for n in model.dentition.fdis:
         t = model.dentition.teeth[n]
-        out[n] = float(np.linalg.norm(t.to_world(t.crown_center, last_poses[n]) - t.to_world(t.crown_center, first_poses[n])))
-    return out
+        start = t.to_world(t.crown_center, first.poses[n])
+        moved[n] = float(np.linalg.norm(t.to_world(t.crown_center, last.poses[n]) - start))
+        lower = undo is not None and n // 10 in (3, 4)
+        own[n] = float(np.linalg.norm(t.to_world(t.crown_center, undo @ last.poses[n]) - start)) if lower else moved[n]
+    return moved, own
 
 
-def moved_ranges(model: MovementModel, detector: str, steps: int, moved: dict[int, float]) -> dict[int, tuple[float, float]]:
-    """FDI -> (least, most) mm of each tooth that moves in any of the runs, over the run given (`moved`:
-    FDI -> mm) and the two ends of the root spread, each simulated for `steps` steps with `detector`;
-    {} when no root was estimated."""
+def moved_ranges(model: MovementModel, detector: str, steps: int, first, last) -> dict[int, tuple[float, float]]:
+    """FDI -> (least, most) mm (`moved_mm`) of each tooth that moves within its jaw by more than
+    0.01 mm in any of the runs: the run given (its records `first` and `last`) and the two ends of
+    the root spread, each simulated for `steps` steps with `detector`; {} when no root was estimated.
+    (Teeth the mandible's hinge only carries are not moving teeth.)"""
     if not estimated(model):
         return {}
-    runs = [moved]
+    runs = [crown_moves(model, first, last)]
     for factor in ROOT_CROWN_SPREAD:
         records = simulate(spread_model(model, factor), detector, steps)
-        first = last = next(records)
-        for last in records:
+        start = end = next(records)
+        for end in records:
             pass
-        runs.append(crown_moves(model, first.poses, last.poses))
+        runs.append(crown_moves(model, start, end))
     out = {}
     for n in model.present:
-        values = [r[n] for r in runs]
-        if max(values) > 1e-6:
+        if max(own[n] for _, own in runs) > 0.01:
+            values = [moved[n] for moved, _ in runs]
             out[n] = (min(values), max(values))
     return out
