@@ -47,6 +47,6 @@ class RateLaw:
 # rate and anchorage rows (`orthosim.evidence.calibration.fit_clinical`; a test refits and compares).
 PARAMETER_SETS: dict[str, RateLaw] = {
     "paper": RateLaw(),
-    "clinical": RateLaw(threshold_cN=20.1, saturation_cN=45.8, max_rate_mm_per_day=0.715 / DAYS_PER_MONTH,
-                        reference_root_area_mm2=200.0, mandibular_bone_factor=2.50),
+    "clinical": RateLaw(threshold_cN=21.1, saturation_cN=46.1, max_rate_mm_per_day=0.715 / DAYS_PER_MONTH,
+                        reference_root_area_mm2=200.0, mandibular_bone_factor=2.49),
 }
