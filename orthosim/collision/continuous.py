@@ -30,14 +30,15 @@ from orthosim.collision.time_of_contact import contact_interval, contact_interva
 
 
 def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, pair_idx: np.ndarray, first_only: bool = False,
-                 world0: np.ndarray | None = None, world1: np.ndarray | None = None, compiled: bool = True):
+                 world0: np.ndarray | None = None, world1: np.ndarray | None = None, compiled: bool | None = None):
     """(pair, node a, node b, t, leave): leaf pairs that may touch in the step, Eq. 2's first time.
 
     poses0, poses1: (n, 4, 4) poses at t = 0 and t = 1 in model body order; pair_idx (p, 2).
     t: (m,) in [0, 1), never later than the first contact of the leaves' contents; leave: (m,)
     when the (inflated) spheres stop overlapping along their chords. world0, world1:
     `model.world_centers` of poses0, poses1 when the caller has them already. compiled: the
-    compiled descent when numba is installed (the same results), False for the numpy descent.
+    compiled descent when numba is installed (the same results), False for the numpy descent, None
+    (default) once compiling it pays (`descent.compiled_descent`).
 
     Every node is placed at both ends by two batched matrix products (arch frame). Node pairs are
     pruned with the swept-sphere bound: a node's chord lies in the sphere about its midpoint M of

@@ -20,20 +20,36 @@ import numpy as np
 from orthosim.collision.model import CollisionModel
 
 _compiled = []  # the descent_compiled module, or None without numba (imported on first use)
+# Numpy descents a process makes before compiling the walk pays: compiling its kernels costs about
+# 5 s of CPU once per machine (more on a loaded one); the compiled walk saves about two thirds of a
+# numpy descent, a few ms on the paper's arch, so a thousand descents buy the compile back.
+PAYS_AFTER_DESCENTS = 1000
+_numpy_descents = [0]
 
 
-def compiled_descent(use: bool = True):
+def compiled_descent(use: bool | None = True):
     """The `descent_compiled` module (the same results as this module's numpy descent, the
-    reference) when `use` and numba is installed, else None. `discrete.overlapping_leaves` and
+    reference) when numba is installed and `use` asks for it, else None (the numpy descent).
+
+    use: True: the compiled walk (compiled now if this machine has not yet); False: the numpy
+    descent; None (the detectors' default), "when it pays": the compiled walk when its kernels are
+    in numba's cache already (loaded in about 0.1 s) or once this process has made
+    PAYS_AFTER_DESCENTS numpy descents, the numpy descent until then. So a short first run on a
+    fresh install (the demo's 20 steps) never waits for numba's compiler, and a long one compiles
+    once, for itself and every later run. `discrete.overlapping_leaves` and
     `continuous.swept_leaves` take `compiled=` for it. Imported on first use, so that processes
     that never descend do not pay numba's import (about 0.3 s)."""
-    if not use:
+    if use is False:
         return None
     if not _compiled:
         from orthosim.collision import descent_compiled
 
         _compiled.append(descent_compiled if descent_compiled.AVAILABLE else None)
-    return _compiled[0]
+    walk = _compiled[0]
+    if walk is None or use is True or walk.kernels_ready():
+        return walk
+    _numpy_descents[0] += 1
+    return walk if _numpy_descents[0] > PAYS_AFTER_DESCENTS else None
 
 
 def sphere_overlap_test(model: CollisionModel, flat: np.ndarray, radii: np.ndarray) -> Callable:

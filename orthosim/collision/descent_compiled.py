@@ -185,6 +185,20 @@ if AVAILABLE:
         return res[:m]
 
 
+def kernels_ready() -> bool:
+    """Whether the walk runs without compiling: each kernel compiled in this process already, or
+    in numba's cache for this source (its index holds an entry). Any doubt reads as False."""
+    for kernel in (_pack, _swept_bounds, _grow, _append, _overlap, _walk):
+        if kernel.signatures:
+            continue
+        try:
+            if not kernel._cache._cache_file._load_index():  # numba's own check: source stamp, entries
+                return False
+        except Exception:  # noqa: BLE001: a numba without this layout: treat as not cached
+            return False
+    return True
+
+
 def _stack_size(model) -> int:
     """Bound on a walk's stack: at most (count - 1) siblings wait per round, plus the one walked."""
     cached = getattr(model, "_compiled_stack_size", None)

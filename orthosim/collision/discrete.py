@@ -7,8 +7,9 @@ Eq. 1 on spheres: |c1 - c2| <= r1 + r2 + FLOAT32_MARGIN_MM; the margin (far belo
 resolution) absorbs float32 rounding so the test stays conservative. Because every tree is conservative (each face lies inside its leaf and all
 the leaf's ancestors), two meshes that intersect always have an overlapping leaf pair here.
 
-The descent runs compiled (`descent_compiled`, numba) when numba is installed: the same leaf pairs
-in the same order, about 3x faster than the numpy descent (`compiled=False` for it).
+The descent runs compiled (`descent_compiled`, numba) when numba is installed and its kernels are
+cached or compiling them pays (`descent.compiled_descent`): the same leaf pairs in the same order,
+about 3x faster than the numpy descent (`compiled=False` for it, `True` to compile now).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from orthosim.collision.model import CollisionModel
 
 
 def overlapping_leaves(model: CollisionModel, poses: np.ndarray, pair_idx: np.ndarray, first_only: bool = False,
-                       world: np.ndarray | None = None, compiled: bool = True):
+                       world: np.ndarray | None = None, compiled: bool | None = None):
     """(pair, node a, node b): flat node indices of every overlapping leaf pair.
 
     poses: (n, 4, 4) local -> arch frame in model body order; pair_idx: (p, 2) body indices;

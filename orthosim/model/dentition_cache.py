@@ -31,6 +31,7 @@ import numpy as np
 
 from orthosim.errors import DamagedFileError
 from orthosim.storage.cacheentry import ENTRY_FORMAT, DamagedEntryWarning, damaged, read_arrays, warn_damaged, write_arrays
+from orthosim.storage.shipped import shipped_entry
 from orthosim.storage.sourcedigest import source_digest
 from orthosim.system.firstrun import preparing
 
@@ -212,9 +213,12 @@ def cached_dentition(parameters: Mapping, build: Callable[[], object], input_fil
 
     input_files = list(input_files)
     path = entry_path(parameters, input_files, cache_dir)
-    if path.is_file():
+    # the user's cache first, then the entries shipped with the package (orthosim.storage.shipped)
+    for found in (path, shipped_entry("dentitions", path.name)):
+        if found is None or not found.is_file():
+            continue
         try:
-            dent, raised = load_dentition(path)
+            dent, raised = load_dentition(found)
         except FileNotFoundError:
             pass  # removed since the look: a miss
         except DamagedFileError as err:

@@ -36,6 +36,7 @@ from orthosim.storage.cacheentry import (ENTRY_FORMAT, HEADER, DamagedEntryWarni
                                         write_arrays)
 from orthosim.system.firstrun import hush, preparing
 from orthosim.system.lifeline import exit_with_parent
+from orthosim.storage.shipped import shipped_entry
 from orthosim.storage.sourcedigest import source_digest
 from orthosim.spheretree.build import DEPTH, build_sphere_tree, check_request, default_branching, mesh_arrays
 from orthosim.spheretree.tree import SphereTree
@@ -197,13 +198,18 @@ def damage(tree: SphereTree, vertices: np.ndarray, faces: np.ndarray, branching:
     return None
 
 
-def _load(entry: _Entry, branching: int, depth: int) -> SphereTree | None:
-    """The stored tree, or None when absent or damaged (then rebuilt and overwritten, with a warning)."""
+def _load(entry: _Entry, branching: int, depth: int, shipped: bool = True) -> SphereTree | None:
+    """The stored tree (the user's cache first, then, with `shipped`, the entries shipped with the
+    package: orthosim.storage.shipped), or None when absent or damaged (then rebuilt and written to
+    the user's cache, with a warning)."""
+    path = entry.path
+    if shipped and not path.is_file():
+        path = shipped_entry("spheretrees", entry.path.name) or entry.path
     try:
-        tree = read_entry(entry.path)
+        tree = read_entry(path)
         reason = damage(tree, *entry.mesh, branching, depth)
         if reason is not None:
-            raise damaged(entry.path, reason)
+            raise damaged(path, reason)
     except FileNotFoundError:
         return None
     except DamagedFileError as err:
@@ -240,9 +246,10 @@ def _worker_start(parent_pid: int) -> None:
 
 def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int | None = None, depth: int = DEPTH,
                         cache_dir: str | Path | None = None, workers: int | None = None,
-                        progress: Callable[[int], None] | None = None) -> list[SphereTree]:
+                        progress: Callable[[int], None] | None = None, shipped: bool = True) -> list[SphereTree]:
     """The trees of many meshes through the cache: each distinct mesh (a mirror pair counts once)
     is loaded or built once, the builds spread over `workers` processes (default: one per core).
+    `shipped=False` ignores the entries shipped with the package (a bench timing the build).
 
     `progress(n)` is called as n more meshes are done. Trees come back in the order of `meshes`.
     `branching` defaults to `default_branching(method)`.
@@ -256,7 +263,7 @@ def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int | 
     for e in entries:
         if e.path in stored or e.path in missing:
             continue
-        tree = _load(e, branching, depth)
+        tree = _load(e, branching, depth, shipped)
         if tree is None:
             missing[e.path] = e
         else:

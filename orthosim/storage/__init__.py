@@ -2,5 +2,6 @@
 
 `atomic` (write beside, then rename), `cacheentry` (every cache's entries: format, key and SHA-256,
 verified on read), `sourcedigest` (cache keys that change with the code), `checksums` (a file's
-SHA-256: is this the file a result was made from).
+SHA-256: is this the file a result was made from), `shipped` (cache entries shipped in the package for
+the shipped cases, read on a miss in the user's cache).
 """
