@@ -71,7 +71,7 @@ def open_viewer(page: str | Path, *, step: int | None = None, view: str = "front
 def label_picture(dentition, state, view: str, size: tuple[int, int] = (320, 240)) -> ToothPicture:
     """The same figures from the offscreen label pass: `state` (a FrameState) drawn from `view` at
     `size`, contact markers left out (the id picture shows teeth only)."""
-    from orthosim_render.regression import _renderer
+    from orthosim_render.frame import cached_renderer as _renderer
     from orthosim_render.scene import DentitionScene
     from orthosim_render.semantic_labels import render_labelled
 

@@ -62,3 +62,9 @@ def reaped(proc: subprocess.Popen):
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
+
+
+def said_lines(stderr: str) -> list[str]:
+    """stderr's lines but the first-run notices (`orthosim: preparing ...`, `orthosim.system.firstrun`),
+    which a cold cache on a slow machine may add to any run."""
+    return [line for line in stderr.strip().splitlines() if not line.startswith("orthosim: preparing ")]

@@ -52,7 +52,9 @@ class Staging:
         written = WrittenStaging(case.path, case.path, None, plan.limits, plan.teeth, tuple(self.stage_poses()),
                                  plan.progress, plan.ipr)
         start, target = case.staging.poses(self.run.dentition)
-        return verify_staging(written, self.run.dentition, start, target, limits, folder=Path(f"{case.name} (in memory)"))
+        # the plan itself: no file of it exists yet, so no certificate or stage model to hold to it
+        return verify_staging(written, self.run.dentition, start, target, limits, folder=Path(f"{case.name} (in memory)"),
+                              certificate=False)
 
     def write(self, folder: str | Path, models: str | None = "stl") -> Path:
         """Write what the core makes into `folder` (a private folder swapped in whole at the end):
@@ -73,7 +75,12 @@ class Staging:
                                         file_sha256(self.case.path))
             write_json(private / "certificate.json", record)
             if models:
-                export_stage_models(self.run.dentition, self.stage_poses(), private / "models", models)
+                from orthosim.staging.reduction import reduced_meshes
+
+                plan, teeth = self.plan, self.run.dentition.teeth
+                reduced = reduced_meshes({n: teeth[n].mesh for n in plan.teeth}, plan.ipr, plan.target)
+                export_stage_models(self.run.dentition, self.stage_poses(), private / "models", models,
+                                    teeth=plan.teeth, reduced=reduced)
         return folder
 
 

@@ -50,6 +50,10 @@ def run_for_batch(case_path: Path, out_dir: Path, options: RunOptions) -> dict:
     import json
 
     started = time.perf_counter()
+    if options.simulate_in_process and (options.render is None or options.render.single_core):
+        from orthosim.system.firstrun import keep_to_one_thread
+
+        keep_to_one_thread()  # a worker on one core starts no thread, not even to say what it prepares
     run_into_folder(case_path, out_dir, options)
     record = json.loads((Path(out_dir) / "run.json").read_text())
     # a batch worker outlives its runs: the run's own wall time, not the process's age

@@ -48,11 +48,14 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from orthosim.errors import CaseError
-from orthosim.model.tooth import ROOT, Tooth
+
+if TYPE_CHECKING:  # a case file's [ligament] table is read without loading the meshes' libraries
+    from orthosim.model.tooth import Tooth
 
 # published ranges (see the module text): field -> (low, high)
 RANGES: dict[str, tuple[float, float]] = {
@@ -180,6 +183,8 @@ class RootSupport:
 def embedded_faces(tooth: Tooth, crest_below_cej_mm: float) -> np.ndarray:
     """(n_faces,) bool: the root's faces whose centroid lies apical of the crest plane y = -crest."""
     centers = tooth.mesh.triangles_center
+    from orthosim.model.tooth import ROOT
+
     return (tooth.face_part == ROOT) & (centers[:, 1] < -float(crest_below_cej_mm))
 
 

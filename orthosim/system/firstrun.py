@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import sys
 import threading
+import time
 from contextlib import contextmanager
 from typing import Iterator
 
@@ -26,6 +27,7 @@ _COMPILING = "the compiled kernels for this machine"
 _said: set[str] = set()
 _lock = threading.Lock()
 _hushed: list[bool] = []
+_one_thread: list[bool] = []
 
 
 def _say(what: str) -> None:
@@ -34,6 +36,12 @@ def _say(what: str) -> None:
             return
         _said.add(what)
     print(f"orthosim: preparing {what} (first run only: kept in the cache for later runs)", file=sys.stderr, flush=True)
+
+
+def keep_to_one_thread() -> None:
+    """This process starts no thread to say its line (an `orthosim batch` worker keeping to one
+    core): a step says what it prepared when it ends, if it took longer than the notice's delay."""
+    _one_thread.append(True)
 
 
 def hush() -> None:
@@ -54,6 +62,14 @@ def preparing(what: str, after_s: float | None = None) -> Iterator[None]:
     if after_s <= 0:
         _say(what)
         yield
+        return
+    if _one_thread:
+        started = time.monotonic()
+        try:
+            yield
+        finally:
+            if time.monotonic() - started > after_s:
+                _say(what)
         return
     timer = threading.Timer(after_s, _say, (what,))
     timer.daemon = True

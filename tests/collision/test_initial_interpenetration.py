@@ -6,7 +6,7 @@ import json
 import numpy as np
 import trimesh
 
-from cli_helpers import orthosim as run
+from cli_helpers import orthosim as run, said_lines
 
 CASE = """
 [case]
@@ -42,7 +42,7 @@ def test_teeth_interpenetrating_at_the_start_are_named_with_their_depth_in_a_war
     (tmp_path / "case.toml").write_text(CASE)
     r = run("run", tmp_path / "case.toml", "--out", tmp_path / "o", "--no-render")
     assert r.returncode == 0, r.stderr
-    (warning,) = r.stderr.strip().splitlines()
+    (warning,) = said_lines(r.stderr)
     assert warning.startswith("orthosim: warning: ") and "interpenetrate at the start" in warning
     assert "11 and 21 by 0.9" in warning  # about the 1 mm the capsules overlap (facets cut a little)
     assert "beyond the 0.9" in r.stdout and "teeth 11-21" in r.stdout
@@ -58,7 +58,7 @@ def test_two_teeth_at_the_same_place_warn_with_the_pair_and_a_real_depth_and_the
     assert r.returncode == 0, r.stderr
     # every vertex of each lies on the other's surface: a vertex-based depth reads 0 here; the
     # largest ball inside both is about the capsules' radius, 3 mm
-    (warning,) = r.stderr.strip().splitlines()
+    (warning,) = said_lines(r.stderr)
     assert "interpenetrate at the start" in warning and "11 and 21 by 2.9" in warning
     assert "max penetration" in r.stdout and "beyond the 2.9" in r.stdout and "teeth 11-21" in r.stdout
     metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())

@@ -16,7 +16,8 @@ import pytest
 from orthosim.evidence import load_evidence, run_evidence
 from orthosim.evidence.centres import MF_RANGE_MM, _bisect, movement_class, rotation_centre_mm, turning
 from orthosim.evidence.run import evidence_models
-from orthosim.mechanics.biomechanics import PARAMETER_SETS, bracket_point
+from orthosim.mechanics.biomechanics import bracket_point
+from orthosim.mechanics.ratelaw import PARAMETER_SETS
 
 ORDER = ["uncontrolled tipping", "controlled tipping", "translation", "root movement"]
 GEOMETRY_TOPICS = ("centre of resistance", "M/F")

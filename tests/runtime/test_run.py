@@ -115,10 +115,12 @@ def test_exported_glb_scene_puts_each_tooth_where_the_run_left_it(two_runs):
     scene = trimesh.load(files[-1], force="scene")
     assert "tooth_14" not in scene.graph.nodes  # extracted
     T, geometry = scene.graph.get("tooth_16")
-    assert np.allclose(T, metrics["teeth"]["16"]["final_pose"], atol=1e-5)
+    final = np.array(metrics["teeth"]["16"]["final_pose"])
+    assert np.allclose(T[:3, :3], final[:3, :3], atol=1e-5)
+    assert np.allclose(T[:3, 3] * 1000.0, final[:3, 3], atol=1e-3)  # glTF's metres
     mesh = scene.geometry[geometry]
-    posed = trimesh.transform_points(mesh.vertices, T)
-    # the exported tooth, posed, has the centroid of the run's final tooth
+    posed = trimesh.transform_points(mesh.vertices, T) * 1000.0
+    # the exported tooth, posed, has the centroid of the run's final tooth (mm)
     from orthosim import load_case
 
     dent = load_case(ROOT / "cases" / "case1_first_premolar_extraction.toml").build_dentition()

@@ -79,7 +79,7 @@ def test_files_added_to_a_finished_run_folder_are_no_damage(tmp_path, case_file)
     assert read_finished_run(run)["output_sha256"].keys() == {"metrics.json", "steps.jsonl"}
 
 
-def recording_run(case_path, out_dir, detector, opts):
+def recording_run(case_path, out_dir, options):
     """A batch run function that leaves a finished run folder at once (no simulation)."""
     _finished_run(Path(out_dir), Path(case_path))
     return json.loads((Path(out_dir) / "metrics.json").read_text())

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from cli_helpers import said_lines
 import trimesh
 
 from orthosim.spheretree import build_sphere_tree, cached_sphere_tree
@@ -96,7 +98,7 @@ def test_a_run_with_a_damaged_cache_warns_once_and_matches_a_clean_run(tmp_path,
     _rewrite(entries[1], _nan_centre)
     damaged = run("run", case, "--out", tmp_path / "damaged", "--no-render")
     assert damaged.returncode == 0, damaged.stderr
-    lines = damaged.stderr.strip().splitlines()
+    lines = said_lines(damaged.stderr)
     assert len(lines) == 2 and all(l.startswith("orthosim: warning: sphere-tree cache entry ") for l in lines), lines
     assert damaged.stdout.split(" -> ")[0] == clean.stdout.split(" -> ")[0]  # same collisions, same penetration
 

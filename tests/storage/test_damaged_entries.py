@@ -21,7 +21,7 @@ from orthosim.spheretree.build import default_branching
 from orthosim.spheretree.cache import _entry
 from orthosim.spheretree.fitcache import cached_fit, fits_dir
 from orthosim.storage.cacheentry import DamagedEntryWarning
-from cli_helpers import orthosim as run, quick_case
+from cli_helpers import orthosim as run, quick_case, said_lines
 from model_helpers import small_dentition
 
 TREE_DEPTH = 3
@@ -184,7 +184,7 @@ def test_a_nan_filled_dentition_entry_is_named_in_one_warning_rebuilt_and_the_ru
         np.savez(fh, **arrays)
     damaged = run("run", case, "--out", tmp_path / "damaged", "--no-render")
     assert damaged.returncode == 0, damaged.stderr
-    lines = damaged.stderr.strip().splitlines()
+    lines = said_lines(damaged.stderr)
     assert lines == [f"orthosim: warning: dentition cache entry {entry} is damaged: checksum mismatch: "
                      "its content changed after it was written; rebuilding it"], lines
     assert (tmp_path / "damaged" / "metrics.json").read_bytes() == (tmp_path / "clean" / "metrics.json").read_bytes()
