@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from cli_helpers import orthosim
+from render_helpers import case3_run
 from orthosim_render.frame_state import FrameState
 from orthosim_render.report.browser import NAMES
 from orthosim_render.viewer_check import disagreements, label_picture, open_viewer
@@ -34,17 +35,7 @@ def chromium():
 @pytest.fixture(scope="module")
 def case3(tmp_path_factory):
     """Case 3 run by `orthosim run` and its step records (the same simulation, in process)."""
-    from orthosim.exchange.case import load_case
-    from orthosim.runtime.strategies import step_records
-
-    out = tmp_path_factory.mktemp("case3") / "run"
-    r = orthosim("run", CASE3, "--out", out, "--frames-per-step", "1", "--size", "160x120")
-    assert r.returncode == 0, r.stderr
-    case = load_case(CASE3)
-    with step_records(case, case.detector, in_process=True) as source:
-        records = list(source.records)
-        dentition = source.dentition
-    return out, dentition, records, frozenset(case.extractions)
+    return case3_run(tmp_path_factory.mktemp("case3"))
 
 
 @pytest.fixture(scope="module")

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from cli_helpers import orthosim
+from render_helpers import case3_run
 from gltf_validator_helpers import errors_of, validate_glb
 from orthosim_render.gltf import quaternion_xyzw, read_glb, rotation_of_quaternion
 from orthosim_render.treatment_gltf import (CONTACT_MARKER_RADIUS_MM, MM, ContactMarker, SceneKeyframe,
@@ -154,15 +155,7 @@ def test_quaternions_round_trip_rotations_of_every_kind():
 @pytest.fixture(scope="module")
 def case3(tmp_path_factory):
     """Case 3 run by `orthosim run` (frames, animation.glb, viewer.html), and its step records."""
-    from orthosim.exchange.case import load_case
-    from orthosim.runtime.strategies import step_records
-
-    out = tmp_path_factory.mktemp("case3") / "run"
-    r = orthosim("run", CASE3, "--out", out, "--frames-per-step", "1", "--size", "160x120")
-    assert r.returncode == 0, r.stderr
-    case = load_case(CASE3)
-    with step_records(case, case.detector, in_process=True) as source:
-        records = list(source.records)
+    out, _, records, _ = case3_run(tmp_path_factory.mktemp("case3"))
     return out, records
 
 
