@@ -126,15 +126,20 @@ def stage_shapes(run, stage: int = 0) -> dict[int, tuple]:
     """Each staged tooth's mesh at `stage` as the stage models give it (`orthosim.staging.models`:
     `stage_tooth_meshes`, the planned interproximal reduction cut from stage 1 on, and `printable`),
     with its faces' crown/root parts (local frame, mm)."""
+    return _printed(run, stage, run.plan.teeth)
+
+
+def _printed(run, stage: int, teeth) -> dict[int, tuple]:
+    """stage_shapes of `teeth` only."""
     from orthosim.model.tooth import part_of_faces
     from orthosim.staging.models import printable, stage_tooth_meshes
     from orthosim.staging.reduction import reduced_meshes
 
     plan = run.plan
-    reduced = reduced_meshes({n: run.dentition.teeth[n].mesh for n in plan.teeth}, plan.ipr, plan.target) \
+    reduced = reduced_meshes({n: run.dentition.teeth[n].mesh for n in teeth}, plan.ipr, plan.target) \
         if stage >= 1 and plan.ipr else None
     shapes = {}
-    for n, mesh in stage_tooth_meshes(run.dentition, plan.teeth, stage, reduced).items():
+    for n, mesh in stage_tooth_meshes(run.dentition, teeth, stage, reduced).items():
         mesh = printable(mesh)
         shapes[n] = (mesh, part_of_faces(mesh))
     return shapes
@@ -161,18 +166,15 @@ def staging_keyframes(run) -> list[SceneKeyframe]:
     return out
 
 
-def _same_mesh(a, b) -> bool:
-    return a.vertices.shape == b.vertices.shape and a.faces.shape == b.faces.shape \
-        and bool((a.vertices == b.vertices).all()) and bool((a.faces == b.faces).all())
-
-
 def write_staging_viewer(run, out_dir: str | Path) -> dict[str, Path]:
     """animation.glb (the stages as keyframes, the stage models' meshes) and viewer.html of a staging."""
-    whole = stage_shapes(run, 0)
-    cut = stage_shapes(run, 1) if run.plan.ipr and run.plan.n_stages >= 1 else {}
-    changed = {n: (1, shape) for n, shape in cut.items() if not _same_mesh(shape[0], whole[n][0])}
+    from orthosim.staging.reduction import tooth_cuts
+
+    plan = run.plan
+    cut = sorted(tooth_cuts(plan.ipr, plan.target)) if plan.ipr and plan.n_stages >= 1 else []
+    changed = {n: (1, shape) for n, shape in _printed(run, 1, cut).items()}  # from stage 1 on, as the stage models
     return write_viewer(out_dir, run.dentition, staging_keyframes(run), run.case.name,
-                        timeline="stage", shapes=whole, changed=changed)
+                        timeline="stage", shapes=stage_shapes(run, 0), changed=changed)
 
 
 # ------------------------------------------------------------------------------------------ a report
