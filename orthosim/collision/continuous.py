@@ -38,7 +38,7 @@ def swept_leaves(model: CollisionModel, poses0: np.ndarray, poses1: np.ndarray, 
     when the (inflated) spheres stop overlapping along their chords. world0, world1:
     `model.world_centers` of poses0, poses1 when the caller has them already. compiled: the
     compiled descent when numba is installed (the same results), False for the numpy descent, None
-    (default) once compiling it pays (`descent.compiled_descent`).
+    (default) once loading or compiling it pays (`descent.compiled_descent`).
 
     Every node is placed at both ends by two batched matrix products (arch frame). Node pairs are
     pruned with the swept-sphere bound: a node's chord lies in the sphere about its midpoint M of

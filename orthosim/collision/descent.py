@@ -13,6 +13,7 @@ whatever the number of tooth pairs, and a depth-d query takes at most 2 (d - 1) 
 
 from __future__ import annotations
 
+import sys
 from typing import Callable
 
 import numpy as np
@@ -20,11 +21,17 @@ import numpy as np
 from orthosim.collision.model import CollisionModel
 
 _compiled = []  # the descent_compiled module, or None without numba (imported on first use)
-# Numpy descents a process makes before compiling the walk pays: compiling its kernels costs about
-# 5 s of CPU once per machine (more on a loaded one); the compiled walk saves about two thirds of a
-# numpy descent, a few ms on the paper's arch, so a thousand descents buy the compile back.
+# Numpy descents a process makes before the compiled walk pays. Compiling its kernels costs about
+# 5 s of CPU once per machine (more on a loaded one): a thousand descents buy that back. Loading
+# them from numba's cache still costs numba's import and its typing set-up, 0.77 s of CPU against
+# 9-10 ms that the walk saves a descent on the paper's arch at rest (both measured in one process,
+# load 6.7, 2026-11-28): about 85 descents buy that back, so the walk waits for a hundred even when
+# cached. A short run (the demo's 20 steps make about 45 descents) never imports numba, and none
+# waits for it before its first step.
 PAYS_AFTER_DESCENTS = 1000
+LOADING_PAYS_AFTER_DESCENTS = 100
 _numpy_descents = [0]
+_in_cache: list[bool] = []  # whether numba's cache held the walk's kernels, asked once a process
 
 
 def compiled_descent(use: bool | None = True):
@@ -32,24 +39,43 @@ def compiled_descent(use: bool | None = True):
     reference) when numba is installed and `use` asks for it, else None (the numpy descent).
 
     use: True: the compiled walk (compiled now if this machine has not yet); False: the numpy
-    descent; None (the detectors' default), "when it pays": the compiled walk when its kernels are
-    in numba's cache already (loaded in about 0.1 s) or once this process has made
-    PAYS_AFTER_DESCENTS numpy descents, the numpy descent until then. So a short first run on a
-    fresh install (the demo's 20 steps) never waits for numba's compiler, and a long one compiles
-    once, for itself and every later run. `discrete.overlapping_leaves` and
-    `continuous.swept_leaves` take `compiled=` for it. Imported on first use, so that processes
-    that never descend do not pay numba's import (about 0.3 s)."""
+    descent; None (the detectors' default), "when it pays": the compiled walk at once when this
+    process has its kernels already (compiled or loaded by an earlier `use=True`); else the numpy
+    descent for the first LOADING_PAYS_AFTER_DESCENTS descents, then the compiled walk if its
+    kernels are in numba's cache, or once this process has made PAYS_AFTER_DESCENTS numpy
+    descents. So a short run never waits for numba (its import, its typing set-up, its compiler),
+    and a long one compiles once, for itself and every later run. `discrete.overlapping_leaves`
+    and `continuous.swept_leaves` take `compiled=` for it."""
     if use is False:
         return None
+    if use is None and not _walk_loaded():
+        _numpy_descents[0] += 1
+        made = _numpy_descents[0]
+        if made <= LOADING_PAYS_AFTER_DESCENTS:
+            return None
+        walk = _walk()
+        if walk is None:
+            return None
+        if not _in_cache:
+            _in_cache.append(walk.kernels_ready())
+        if not _in_cache[0] and made <= PAYS_AFTER_DESCENTS:
+            return None
+    return _walk()
+
+
+def _walk():
+    """The descent_compiled module (importing numba), or None without numba."""
     if not _compiled:
         from orthosim.collision import descent_compiled
 
         _compiled.append(descent_compiled if descent_compiled.AVAILABLE else None)
-    walk = _compiled[0]
-    if walk is None or use is True or walk.kernels_ready():
-        return walk
-    _numpy_descents[0] += 1
-    return walk if _numpy_descents[0] > PAYS_AFTER_DESCENTS else None
+    return _compiled[0]
+
+
+def _walk_loaded() -> bool:
+    """Whether this process holds the walk's kernels already (without importing numba to ask)."""
+    module = sys.modules.get("orthosim.collision.descent_compiled")
+    return module is not None and module.AVAILABLE and module.kernels_loaded()
 
 
 def sphere_overlap_test(model: CollisionModel, flat: np.ndarray, radii: np.ndarray) -> Callable:

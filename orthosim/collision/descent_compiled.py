@@ -185,6 +185,11 @@ if AVAILABLE:
         return res[:m]
 
 
+def kernels_loaded() -> bool:
+    """Whether every kernel of the walk is compiled or loaded in this process already (no file read)."""
+    return all(kernel.signatures for kernel in (_pack, _swept_bounds, _grow, _append, _overlap, _walk))
+
+
 def kernels_ready() -> bool:
     """Whether the walk runs without compiling: each kernel compiled in this process already, or
     in numba's cache for this source (its index holds an entry). Any doubt reads as False."""

@@ -7,8 +7,8 @@ Eq. 1 on spheres: |c1 - c2| <= r1 + r2 + FLOAT32_MARGIN_MM; the margin (far belo
 resolution) absorbs float32 rounding so the test stays conservative. Because every tree is conservative (each face lies inside its leaf and all
 the leaf's ancestors), two meshes that intersect always have an overlapping leaf pair here.
 
-The descent runs compiled (`descent_compiled`, numba) when numba is installed and its kernels are
-cached or compiling them pays (`descent.compiled_descent`): the same leaf pairs in the same order,
+The descent runs compiled (`descent_compiled`, numba) when numba is installed and loading or
+compiling its kernels pays (`descent.compiled_descent`): the same leaf pairs in the same order,
 about 3x faster than the numpy descent (`compiled=False` for it, `True` to compile now).
 """
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from orthosim.errors import SphereTreeError
-from orthosim.spheretree.fit import FIT_BRANCHING, build_fit_tree
+from orthosim.spheretree.defaults import FIT_BRANCHING
 from orthosim.spheretree.octree import MAX_OCTREE_DEPTH, build_octree_tree
 from orthosim.spheretree.tree import SphereTree
 
@@ -66,4 +66,8 @@ def build_sphere_tree(mesh, method: str = "fit", branching: int | None = None, d
     vertices, faces = mesh_arrays(mesh)
     if method == "octree":
         return build_octree_tree(vertices, faces, depth)
+    # imported here: the optimising builder pulls numba and scipy, which a process that only loads
+    # cached trees (spheretree.cache, through this module's checks) does without
+    from orthosim.spheretree.fit import build_fit_tree
+
     return build_fit_tree(vertices, faces, branching, depth)

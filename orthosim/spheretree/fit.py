@@ -39,18 +39,12 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
+from orthosim.spheretree.defaults import FIT_BRANCHING  # why 9: see that module
 from orthosim.spheretree.enclose import enclosing_spheres, node_vertex_groups, radii_to_cover, radii_to_cover_each
 from orthosim.spheretree.measure import mesh_volume
 from orthosim.spheretree.outside_band import OutsideBand
 from orthosim.spheretree.tree import SphereTree
 from orthosim.system.firstrun import announce_compiles
-
-
-# The optimising builder's branching when none is asked: 9 (1, 9, 81 and up to 729 leaves at depth
-# 4). Smaller leaves leave thinner caps on the ridges and cusps teeth meet with, where the discrete
-# detector's false contacts come from: on real teeth, poses 0.1-0.25 mm apart read touching 17 % of
-# the time at 512 leaves (branching 8), 6-10 % at 729 (DEVELOPERS.md, "9-ary trees by default").
-FIT_BRANCHING = 9
 
 
 @dataclass(frozen=True)
