@@ -10,6 +10,7 @@ numpy. A step's state is just the poses (dict FDI -> (4, 4) local -> arch frame,
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Callable, Mapping
 
 import numpy as np
@@ -105,11 +106,17 @@ class CollisionModel:
         self.radii32 = (self.radii + FLOAT32_MARGIN_MM).astype(np.float32)
         # what the descent compares to choose which node to split: the radius, -1 for leaves
         self.split_key = np.where(self.child_count > 0, self.radii, -1.0).astype(np.float32)
-        self._circle = _circle_data(self.bodies)
         self.rho_max = np.array([np.linalg.norm(b.mesh.vertices, axis=1).max() for b in self.bodies])
         self._rest = np.stack([b.rest_pose for b in self.bodies]).astype(float)  # (n, 4, 4)
         self._keys = np.array([b.key for b in self.bodies], dtype=np.int64)
         self._key_order = np.argsort(self._keys)
+
+    @cached_property
+    def _circle(self) -> "_CircleData":
+        """The bounding circles' data (`circles`, detector 1), worked out when that detector first
+        asks: a convex hull and a smallest circle per tooth that no other detector needs, so a run
+        with another detector does not wait for them before its first step."""
+        return _circle_data(self.bodies)
 
     def roots(self, body_idx: np.ndarray) -> np.ndarray:
         """Flat node index of the root of each body."""
