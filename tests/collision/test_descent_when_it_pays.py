@@ -67,7 +67,8 @@ def test_a_fresh_machine_descends_with_numpy_until_compiling_pays(tmp_path):
 @pytest.mark.slow  # compiles the walk's kernels into a fresh numba cache
 def test_with_the_kernels_cached_a_short_run_never_imports_numba_and_a_longer_one_loads_the_walk(tmp_path):
     cache = tmp_path / "numba-cache"
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])}
+    path = os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])  # collision_helpers
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": path}
     compiled = subprocess.run([sys.executable, "-c", _COMPILE], env=env, capture_output=True, text=True, timeout=900)
     assert compiled.returncode == 0, compiled.stderr
     seen = _probe(cache)

@@ -19,7 +19,8 @@ from orthosim.runtime.strategies import SHARED_MODULES
 
 ROOT = Path(__file__).resolve().parents[2]
 CASE = ROOT / "cases" / "case1_first_premolar_extraction.toml"
-NOT_BEFORE_THE_FIRST_STEP = ("numba", "orthosim.spheretree.fit", "orthosim.spheretree.outside_band", "pyrender", "OpenGL")
+NOT_BEFORE_THE_FIRST_STEP = ("numba", "orthosim.spheretree.fit", "orthosim.spheretree.outside_band", "pyrender",
+                             "OpenGL")
 
 # the child's side of `orthosim run`: what the drawing process imports before it forks, then the
 # simulation stream (orthosim.runtime.stream) up to its first step record
