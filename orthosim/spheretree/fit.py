@@ -236,6 +236,38 @@ def _radius_and_gap(points, centers):
     return radius, gap
 
 
+@njit(cache=True, nogil=True)
+def _pair_patches(groups, pairs, vertices, vertex_area):
+    """`_LeafFitter.merged_patches` compiled: (p, W, 4) rows of pair (a, b)'s vertices (x, y, z mm,
+    area mm^2), a's then b's, padded with a's first vertex at weight 0."""
+    m = groups.shape[1]
+    length = np.empty(len(groups), np.int64)
+    for g in range(len(groups)):
+        n = 1
+        while n < m and groups[g, n] != groups[g, 0]:  # a row's vertices first, then copies of its first
+            n += 1
+        length[g] = n
+    width = 1
+    for p in range(len(pairs)):
+        width = max(width, length[pairs[p, 0]] + length[pairs[p, 1]])
+    out = np.zeros((len(pairs), width, 4))
+    for p in range(len(pairs)):
+        a, b = pairs[p, 0], pairs[p, 1]
+        col = 0
+        for leaf in (a, b):
+            for j in range(length[leaf]):
+                v = groups[leaf, j]
+                for k in range(3):
+                    out[p, col, k] = vertices[v, k]
+                out[p, col, 3] = vertex_area[v]
+                col += 1
+        first = groups[a, 0]
+        for c in range(col, width):
+            for k in range(3):
+                out[p, c, k] = vertices[first, k]
+    return out
+
+
 def voxel_spacing(vertices: np.ndarray, faces: np.ndarray, options: FitOptions) -> float:
     """Spacing of the scoring voxels for this mesh, mm: `voxel_per_edge` x its median edge length,
     kept within [min_voxel_mm, voxel_mm]."""
@@ -263,6 +295,18 @@ class _LeafFitter:
         real = np.ones(groups.shape, dtype=bool)
         real[:, 1:] = groups[:, 1:] != groups[:, :1]
         return np.concatenate([self.vertices[groups], (self.vertex_area[groups] * real)[..., None]], axis=2)
+
+    def merged_patches(self, groups: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+        """The patches of leaf pairs (p, 2) taken together, from padded vertex groups (L, M)
+        (`node_vertex_groups`): (p, W, 4) as `patches`, each row a's vertices, then b's, then
+        padding (a's first vertex, weight 0), W the widest pair.
+
+        The same points and weights as the two leaves' `patches` side by side, without the
+        padding between them: a repeated point changes no farthest distance nor enclosing
+        sphere, and weighs nothing in the gap, so every fit of the pair is the same, while the
+        compiled loops run over the real vertices only (leaves hold about a sixth of the widest).
+        """
+        return _pair_patches(groups, np.ascontiguousarray(pairs, dtype=np.int64), self.vertices, self.vertex_area)
 
     def score(self, pts: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For padded weighted patch points (L, M, 4) (`patches`) and centres (L, c, 3), mm: the score
@@ -525,9 +569,8 @@ def _rebalance(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray, r
     changed = np.concatenate([cand, n + np.arange(m)])
     cs, rs, split_cost = fitter.fit(trial, n + m, changed)
     gain = cost[cand] - split_cost[:m] - split_cost[m:]
-    groups = fitter.patches(node_vertex_groups(faces, leaf_of_face, n))
     nsum = fitter.normal_sums(leaf_of_face, n)
-    merged_pts = np.concatenate([groups[pairs[:, 0]], groups[pairs[:, 1]]], axis=1)
+    merged_pts = fitter.merged_patches(node_vertex_groups(faces, leaf_of_face, n), pairs)
     cm, rm, merged_cost = fitter.fit_groups(merged_pts, nsum[pairs[:, 0]] + nsum[pairs[:, 1]],
                                             search_rounds=options.rebalance_merge_rounds)
     merge_cost = merged_cost - cost[pairs[:, 0]] - cost[pairs[:, 1]]
