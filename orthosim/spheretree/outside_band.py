@@ -138,8 +138,10 @@ class OutsideBand:
         coarse[:, 1::2] = False
         coarse[:, :, 1::2] = False
         weight[coarse] = 8
-        # int32 holds any column's sum (at most 8 per voxel); half the memory traffic of int64
-        self.prefix = np.zeros((shape[0], shape[1], shape[2] + 1), dtype=np.int32)
+        # A column's sum is at most 8 per voxel: int16 holds it on any tooth's grid (a quarter of
+        # int64's memory traffic, and the grid stays in cache longer), int32 on longer columns
+        kind = np.int16 if 8 * shape[2] <= np.iinfo(np.int16).max else np.int32
+        self.prefix = np.zeros((shape[0], shape[1], shape[2] + 1), dtype=kind)
         np.cumsum(weight, axis=2, out=self.prefix[:, :, 1:])
 
     def count(self, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
