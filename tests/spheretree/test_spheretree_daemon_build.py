@@ -15,9 +15,9 @@ from orthosim.spheretree import cached_sphere_trees
 
 
 def _meshes() -> list[trimesh.Trimesh]:
-    return [trimesh.creation.capsule(height=8.0, radius=2.5, count=[20, 20]),
-            trimesh.creation.capsule(height=5.0, radius=3.0, count=[16, 16]),
-            trimesh.creation.icosphere(subdivisions=3, radius=4.0)]
+    return [trimesh.creation.capsule(height=8.0, radius=2.5, count=[16, 16]),
+            trimesh.creation.capsule(height=5.0, radius=3.0, count=[12, 12]),
+            trimesh.creation.icosphere(subdivisions=2, radius=4.0)]
 
 
 def _arrays(trees) -> list[list[np.ndarray]]:
@@ -26,7 +26,7 @@ def _arrays(trees) -> list[list[np.ndarray]]:
 
 def _build_in_daemon(cache_dir: str, out) -> None:
     assert multiprocessing.current_process().daemon
-    out.put(_arrays(cached_sphere_trees(_meshes(), cache_dir=cache_dir, workers=2, shipped=False)))
+    out.put(_arrays(cached_sphere_trees(_meshes(), depth=3, cache_dir=cache_dir, workers=2, shipped=False)))
 
 
 def test_a_daemonic_process_builds_the_same_trees_on_several_workers(tmp_path):
@@ -37,7 +37,7 @@ def test_a_daemonic_process_builds_the_same_trees_on_several_workers(tmp_path):
     in_daemon = out.get()
     child.join()
     assert child.exitcode == 0
-    serial = _arrays(cached_sphere_trees(_meshes(), cache_dir=tmp_path / "serial", workers=1, shipped=False))
+    serial = _arrays(cached_sphere_trees(_meshes(), depth=3, cache_dir=tmp_path / "serial", workers=1, shipped=False))
     assert len(in_daemon) == len(serial) == 3
     for a, b in zip(in_daemon, serial):
         assert len(a) == len(b)
