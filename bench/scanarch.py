@@ -95,7 +95,11 @@ def labelled_scan_timings(faces_target: int = 300_000) -> dict:
     triangles are about half gum), is loaded as a `labelled-scan` model (split, roots estimated,
     placed, the dentition cached) and its sphere trees built (`CollisionModel.from_dentition`), first
     with empty caches (cold, in a fresh `$ORTHOSIM_CACHE`), then again from the caches (warm, same
-    process); the model and the trees are timed apart. Targets: 30 s cold, 2 s warm in all.
+    process); the model and the trees are timed apart. Targets: 12 s cold on two cores (issue 42),
+    2 s warm in all. `cold_trees_built` counts the trees the cold run wrote to its empty cache, one
+    per tooth shape it built: equal to `teeth` (a scan's teeth are no exact mirror images, each
+    crown's root and frame being estimated on its own), none came from the entries shipped with
+    the package (the demo model's, `orthosim.storage.shipped`), so the cold figure times the builds.
     """
     import os
     import tempfile
@@ -122,7 +126,7 @@ def labelled_scan_timings(faces_target: int = 300_000) -> dict:
         parameters, inputs = case._mesh_model_key()
         old = os.environ.get("ORTHOSIM_CACHE")
         os.environ["ORTHOSIM_CACHE"] = str(Path(tmp) / "cache")
-        seconds = []
+        seconds, written = [], []
         try:
             for _ in range(2):
                 start = time.perf_counter()
@@ -130,6 +134,7 @@ def labelled_scan_timings(faces_target: int = 300_000) -> dict:
                 built = time.perf_counter()
                 CollisionModel.from_dentition(dent)
                 seconds.append((built - start, time.perf_counter() - built))
+                written.append(len(list((Path(tmp) / "cache").glob("*.npz"))))  # tree entries (dentitions: a subfolder)
         finally:
             if old is None:
                 os.environ.pop("ORTHOSIM_CACHE", None)
@@ -139,4 +144,4 @@ def labelled_scan_timings(faces_target: int = 300_000) -> dict:
             "cold_s": sum(seconds[0]), "warm_s": sum(seconds[1]),
             "cold_model_s": seconds[0][0], "cold_trees_s": seconds[0][1],
             "warm_model_s": seconds[1][0], "warm_trees_s": seconds[1][1],
-            "target_cold_s": 30.0, "target_warm_s": 2.0}
+            "cold_trees_built": written[0], "target_cold_s": 12.0, "target_warm_s": 2.0}

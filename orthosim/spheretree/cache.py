@@ -14,7 +14,8 @@ Left and right teeth are mirror images (x -> -x in the local frame, see `orthosi
 mirror maps a conservative tree to a conservative tree exactly (negating a float is exact), so a
 mesh and its mirror share one entry: the tree is built and stored for whichever of the two has the
 smaller key, and mirrored on the way out for the other. A full dentition costs half the builds,
-and `cached_sphere_trees` spreads those builds over the machine's cores (one process each).
+and `cached_sphere_trees` spreads those builds over the machine's cores (one process each; in a
+daemonic process, which may not start processes, one thread each).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ import hashlib
 import multiprocessing
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -277,9 +278,16 @@ def cached_sphere_trees(meshes: Sequence, method: str = "fit", branching: int | 
 
     def built():
         """(entry, tree) as each build finishes."""
-        # a daemonic process (the simulation child of a drawn run, orthosim.runtime.background) may not start any
-        if workers <= 1 or multiprocessing.current_process().daemon:
+        if workers <= 1:
             yield from ((e, _build(job)) for job, e in zip(jobs, waiting))
+            return
+        if multiprocessing.current_process().daemon:
+            # a daemonic process (the simulation child of a drawn run, orthosim.runtime.background) may
+            # not start processes: threads there, which run side by side in the compiled scoring (nogil)
+            with ThreadPoolExecutor(max_workers=workers) as threads:
+                futures = {threads.submit(_build, job): e for job, e in zip(jobs, waiting)}
+                for done in as_completed(futures):
+                    yield futures[done], done.result()
             return
         # fork: the children start at once with the parent's imports and compiled kernels
         # each worker ends with this process if it is killed outright (orthosim.system.lifeline)

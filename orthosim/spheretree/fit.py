@@ -153,15 +153,46 @@ def _group_means(points: np.ndarray, label: np.ndarray, k: int, weights: np.ndar
     return sums / np.maximum(total, 1e-300)[:, None], total
 
 
+# Centres up to this many make one leaf of scipy's k-d tree (its default leafsize), which it scans in
+# index order keeping the first nearest: `_nearest_centres` answers the same without building it.
+_SCANNED_CENTRES = 16
+
+
+@njit(cache=True, nogil=True)
+def _nearest_centres(points, centres):
+    """(n,) index of the nearest of the (k, d) centres to each of the (n, d) points, by squared
+    distance summed over the axes in order, the first on a tie (as a one-leaf cKDTree query)."""
+    out = np.empty(len(points), np.int64)
+    for i in range(len(points)):
+        best, arg = np.inf, 0
+        for j in range(len(centres)):
+            d2 = 0.0
+            for a in range(points.shape[1]):
+                t = points[i, a] - centres[j, a]
+                d2 += t * t
+            if d2 < best:
+                best, arg = d2, j
+        out[i] = arg
+    return out
+
+
+def _nearest(points: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """(n,) index of the nearest centre (k, d) to each point (n, d): a k-d tree, or for a few
+    centres (the 2-means of a leaf split, hundreds of times a tooth) a compiled scan."""
+    if len(centres) <= _SCANNED_CENTRES:
+        return _nearest_centres(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(centres, dtype=np.float64))
+    return cKDTree(centres).query(points)[1]
+
+
 def _kmeans(points: np.ndarray, k: int, iterations: int, rng, weights: np.ndarray | None = None) -> np.ndarray:
-    """(n, d) points into at most k clusters (Lloyd, k-d tree assignment): (n,) labels 0..used-1."""
+    """(n, d) points into at most k clusters (Lloyd, nearest-centre assignment): (n,) labels 0..used-1."""
     k = min(k, len(points))
     centres = points[_farthest_points(points, k, rng)]
     for _ in range(iterations):
-        label = cKDTree(centres).query(points)[1]
+        label = _nearest(points, centres)
         means, total = _group_means(points, label, k, weights)
         centres[total > 0] = means[total > 0]
-    label = cKDTree(centres).query(points)[1]
+    label = _nearest(points, centres)
     return np.unique(label, return_inverse=True)[1]
 
 
@@ -230,6 +261,38 @@ def _radius_and_gap(points, centers):
     return radius, gap
 
 
+@njit(cache=True, nogil=True)
+def _pair_patches(groups, pairs, vertices, vertex_area):
+    """`_LeafFitter.merged_patches` compiled: (p, W, 4) rows of pair (a, b)'s vertices (x, y, z mm,
+    area mm^2), a's then b's, padded with a's first vertex at weight 0."""
+    m = groups.shape[1]
+    length = np.empty(len(groups), np.int64)
+    for g in range(len(groups)):
+        n = 1
+        while n < m and groups[g, n] != groups[g, 0]:  # a row's vertices first, then copies of its first
+            n += 1
+        length[g] = n
+    width = 1
+    for p in range(len(pairs)):
+        width = max(width, length[pairs[p, 0]] + length[pairs[p, 1]])
+    out = np.zeros((len(pairs), width, 4))
+    for p in range(len(pairs)):
+        a, b = pairs[p, 0], pairs[p, 1]
+        col = 0
+        for leaf in (a, b):
+            for j in range(length[leaf]):
+                v = groups[leaf, j]
+                for k in range(3):
+                    out[p, col, k] = vertices[v, k]
+                out[p, col, 3] = vertex_area[v]
+                col += 1
+        first = groups[a, 0]
+        for c in range(col, width):
+            for k in range(3):
+                out[p, c, k] = vertices[first, k]
+    return out
+
+
 def voxel_spacing(vertices: np.ndarray, faces: np.ndarray, options: FitOptions) -> float:
     """Spacing of the scoring voxels for this mesh, mm: `voxel_per_edge` x its median edge length,
     kept within [min_voxel_mm, voxel_mm]."""
@@ -258,6 +321,18 @@ class _LeafFitter:
         real[:, 1:] = groups[:, 1:] != groups[:, :1]
         return np.concatenate([self.vertices[groups], (self.vertex_area[groups] * real)[..., None]], axis=2)
 
+    def merged_patches(self, groups: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+        """The patches of leaf pairs (p, 2) taken together, from padded vertex groups (L, M)
+        (`node_vertex_groups`): (p, W, 4) as `patches`, each row a's vertices, then b's, then
+        padding (a's first vertex, weight 0), W the widest pair.
+
+        The same points and weights as the two leaves' `patches` side by side, without the
+        padding between them: a repeated point changes no farthest distance nor enclosing
+        sphere, and weighs nothing in the gap, so every fit of the pair is the same, while the
+        compiled loops run over the real vertices only (leaves hold about a sixth of the widest).
+        """
+        return _pair_patches(groups, np.ascontiguousarray(pairs, dtype=np.int64), self.vertices, self.vertex_area)
+
     def score(self, pts: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For padded weighted patch points (L, M, 4) (`patches`) and centres (L, c, 3), mm: the score
         (outside voxels held plus `gap_weight` x the gap to the patch in voxel volumes) and radii, (L, c)."""
@@ -273,17 +348,19 @@ class _LeafFitter:
         r, gap = _radius_and_gap(np.ascontiguousarray(pts, dtype=np.float64), np.ascontiguousarray(centres, dtype=np.float64))
         return self.band.best(centres, r, self.options.gap_weight * gap / self.voxel**3, r / (100 * r.max()), bound)
 
-    def handoff(self, leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray, k: int = 6) -> np.ndarray:
+    def handoff(self, leaf_of_face: np.ndarray, c: np.ndarray, r: np.ndarray, groups: np.ndarray | None = None,
+                k: int = 6) -> np.ndarray:
         """Hand the triangles that set a leaf's radius to a neighbour that may grow, where that pays.
 
         Leaf A's radius is set by its farthest vertex; giving the A-triangles at that vertex to a
         nearby leaf B (which grows just enough to hold them) changes the outside volume by
         [B grown - B] + [A shrunk - A]; the best negative change per A is taken, at most one move
         into or out of each leaf per call, so the changes evaluated are the changes made.
+        `groups`: the leaves' padded vertex groups (`node_vertex_groups`) when the caller has them.
         """
         n = len(r)
         faces, vertices = self.faces, self.vertices
-        groups = node_vertex_groups(faces, leaf_of_face, n)
+        groups = node_vertex_groups(faces, leaf_of_face, n) if groups is None else groups
         pts = vertices[groups]
         far_vertex = groups[np.arange(n), np.sqrt(((pts - c[:, None, :]) ** 2).sum(axis=2)).argmax(axis=1)]
         crit = np.any(faces == far_vertex[leaf_of_face][:, None], axis=1)
@@ -519,9 +596,8 @@ def _rebalance(fitter: "_LeafFitter", leaf_of_face: np.ndarray, c: np.ndarray, r
     changed = np.concatenate([cand, n + np.arange(m)])
     cs, rs, split_cost = fitter.fit(trial, n + m, changed)
     gain = cost[cand] - split_cost[:m] - split_cost[m:]
-    groups = fitter.patches(node_vertex_groups(faces, leaf_of_face, n))
     nsum = fitter.normal_sums(leaf_of_face, n)
-    merged_pts = np.concatenate([groups[pairs[:, 0]], groups[pairs[:, 1]]], axis=1)
+    merged_pts = fitter.merged_patches(node_vertex_groups(faces, leaf_of_face, n), pairs)
     cm, rm, merged_cost = fitter.fit_groups(merged_pts, nsum[pairs[:, 0]] + nsum[pairs[:, 1]],
                                             search_rounds=options.rebalance_merge_rounds)
     merge_cost = merged_cost - cost[pairs[:, 0]] - cost[pairs[:, 1]]
@@ -576,9 +652,9 @@ def _improve(fitter: "_LeafFitter", leaf: np.ndarray, c: np.ndarray, r: np.ndarr
         leaf = fitter.reassign(leaf, c, r)
         leaf, c, r = _compact(leaf, c, r)
         for _ in range(options.handoff_rounds):
-            pts = vertices[node_vertex_groups(faces, leaf, len(r))]
-            r = radii_to_cover(pts, c)
-            leaf = fitter.handoff(leaf, c, r)
+            groups = node_vertex_groups(faces, leaf, len(r))
+            r = radii_to_cover(vertices[groups], c)
+            leaf = fitter.handoff(leaf, c, r, groups)
         pts = fitter.patches(node_vertex_groups(faces, leaf, len(r)))
         c = fitter.search(pts, c, 0.1 * radii_to_cover(pts, c), options.refit_rounds)
         r = radii_to_cover(pts, c)
