@@ -28,6 +28,7 @@ def _turn(rng, degrees: float) -> np.ndarray:
     return trimesh.transformations.rotation_matrix(np.radians(rng.uniform(-degrees, degrees)), axis / np.linalg.norm(axis))
 
 
+@pytest.mark.slow
 def test_the_hierarchy_built_in_numpy_is_the_compiled_one(paper_teeth):
     for fdi in (11, 16, 33, 47):
         tri = np.asarray(paper_teeth.teeth[fdi].mesh.triangles, float)
@@ -39,6 +40,7 @@ def test_the_hierarchy_built_in_numpy_is_the_compiled_one(paper_teeth):
             assert np.array_equal(compiled, in_numpy)
 
 
+@pytest.mark.slow
 def test_signed_distances_in_numpy_are_the_compiled_ones(paper_teeth):
     """Points near the surface (vertices and face centres, jittered by up to 1 mm, so that closest
     corners and edges, shared by several faces, come up often), deep inside and far away, on the
@@ -67,6 +69,7 @@ def _pushed_together(rng, teeth, a: int, b: int) -> tuple[np.ndarray, np.ndarray
     return pose_a, (pose_b @ _turn(rng, 3.0) if rng.random() < 0.5 else pose_b)
 
 
+@pytest.mark.slow
 def test_interpenetration_depths_in_numpy_are_the_compiled_ones(paper_teeth, monkeypatch):
     """A step's measure (vertices and edges) on neighbouring and facing teeth pushed into each other
     at random poses; the full measure (faces and the ball inside both) on a few of them."""
