@@ -45,8 +45,9 @@ import trimesh
 from numba import njit
 
 from orthosim.geometry.signeddistance import (STACK, MeshSurface, closest_face, closest_on_triangles_numpy, compiled_pays,
-                                              distance_to_face, mesh_surface, node_gaps_numpy, signed_distances,
-                                              signed_distances_numpy, squared_distances, surface_within)
+                                              distance_to_face, distance_to_face_scalar, mesh_surface, node_gaps_numpy,
+                                              signed_distance_scalar, signed_distances, signed_distances_numpy,
+                                              squared_distances, surface_within)
 from orthosim.system.firstrun import announce_compiles
 
 DEPTH_TOLERANCE_MM = 0.01  # the surface depth is found to within this below the truth
@@ -272,10 +273,18 @@ def _depth_faces_numpy(points, s):
     return -d, f
 
 
+def _depth_face_scalar(p, s) -> tuple[float, int]:
+    """`_depth_face` of the one point p (3,) in Python floats: (mm inside `s`, face)."""
+    d, f = signed_distance_scalar(p, s, math.inf)
+    return -d, f
+
+
 def _farthest_from_face_numpy(corners, s, f) -> float:
-    """`_farthest_from_face` in numpy: the largest distance from the corners (k, 3) to face f."""
-    _, x, y, z = closest_on_triangles_numpy(corners, np.repeat(s.vertices[s.faces[f]][None], len(corners), axis=0))
-    return max([0.0] + np.sqrt(squared_distances(corners, x, y, z)).tolist())
+    """`_farthest_from_face` in Python floats: the largest distance from the corners (k, 3) to face f."""
+    far = 0.0
+    for corner in corners:
+        far = max(far, distance_to_face_scalar(corner, s, f))
+    return far
 
 
 def _reaching_faces_numpy(own, other, floor):
@@ -306,11 +315,10 @@ def _edge_depth_numpy(segments, ends, best, tol, s):
             if 0.5 * (da + db + length) <= best + tol:
                 continue
             g = 0.5 * (a + b)
-            depth, face = _depth_faces_numpy(g[None], s)
-            d = float(depth[0])
+            d, face = _depth_face_scalar(g, s)
             if d > best:
                 best = d
-            if _farthest_from_face_numpy(np.stack([a, b]), s, face[0]) <= best + tol:
+            if _farthest_from_face_numpy((a, b), s, face) <= best + tol:
                 continue
             stack.append((a, g, da, d))
             stack.append((g, b, d, db))
@@ -326,13 +334,12 @@ def _surface_depth_numpy(tris, best, tol, s):
             a, b, c = stack.pop()
             g = (a + b + c) / 3.0
             r = max(_length(a - g), _length(b - g), _length(c - g))
-            depth, face = _depth_faces_numpy(g[None], s)
-            d = float(depth[0])
+            d, face = _depth_face_scalar(g, s)
             if d > best:
                 best = d
             if d + r <= best + tol:
                 continue
-            if _farthest_from_face_numpy(np.stack([a, b, c]), s, face[0]) <= best + tol:
+            if _farthest_from_face_numpy((a, b, c), s, face) <= best + tol:
                 continue
             ab, bc, ca = 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)
             stack.extend([(a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca)])
@@ -381,7 +388,7 @@ def _ball_depth_numpy(points, normals, rmax, best, tol, own, other):
             else:
                 hi = mid
         c = p - lo * n
-        inside = min(float(_depth_faces_numpy(c[None], own)[0][0]), float(_depth_faces_numpy(c[None], other)[0][0]))
+        inside = min(_depth_face_scalar(c, own)[0], _depth_face_scalar(c, other)[0])
         if inside > best:
             best = inside
     return best
@@ -389,7 +396,7 @@ def _ball_depth_numpy(points, normals, rmax, best, tol, own, other):
 
 # --------------------------------------------------------------------------------- the measure
 
-_EDGE_KERNELS = (_depth_face, _depth, _edge_depth, _reaching_faces)  # what a step's depth compiles
+_EDGE_KERNELS = (signed_distances, _depth_face, _depth, _edge_depth, _reaching_faces)  # what a step's depth compiles
 
 
 def _tangent_points(own: MeshSurface, faces: np.ndarray, verts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -32,6 +32,8 @@ the one the kernel's descent meets first.
 
 from __future__ import annotations
 
+import math
+import time
 import weakref
 from typing import NamedTuple
 
@@ -90,7 +92,7 @@ class MeshSurface:
         tri = V[F]
         centroids = tri.mean(axis=1)
         radii = np.linalg.norm(tri - centroids[:, None, :], axis=2).max(axis=1) * (1 + 1e-12) + 1e-12
-        build = build_hierarchy if compiled_pays() else build_hierarchy_numpy  # the same arrays
+        build = build_hierarchy if compiled_pays(build_hierarchy) else build_hierarchy_numpy  # the same arrays
         tree = build(centroids, radii, tri.min(axis=1), tri.max(axis=1), LEAF_FACES)
         self.arrays = SurfaceArrays(V, F, np.ascontiguousarray(tri[tree[-1]]), face_n, face_edges, edge_n, vert_n, *tree)
         lo, hi = V.min(axis=0), V.max(axis=0)
@@ -117,7 +119,8 @@ class MeshSurface:
         negative inside, +inf where no point of the surface lies within `cap_mm`; (n,) the face
         holding the closest point, -1 beyond the cap). A cap keeps far points cheap."""
         pts = np.ascontiguousarray(np.asarray(points, float).reshape(-1, 3))
-        return (signed_distances if compiled_pays() else signed_distances_numpy)(pts, self.arrays, float(cap_mm))
+        query = signed_distances if compiled_pays(signed_distances) else signed_distances_numpy  # the same numbers
+        return query(pts, self.arrays, float(cap_mm))
 
     def moved(self, M: np.ndarray) -> SurfaceArrays:
         """The arrays with the mesh moved by the rigid transform M (4, 4): corners, normals and
@@ -425,26 +428,27 @@ def surface_within(p, rho, s):
 
 # --------------------------------------------------------------------------------- the same in numpy
 
-# Point queries a process answers in numpy before compiling the kernels pays: numba compiles this
-# module's and `geometry.penetration`'s kernels in seconds of CPU once per machine, and a numpy query
-# costs about a hundred microseconds more than a compiled one, so some ten thousand queries buy the
-# compile back. A short first run (the demo) never compiles; a long one compiles once, for every
-# later run too. An estimate, not a measurement on a quiet machine.
-PAYS_AFTER_POINTS = 20_000
-_numpy_points = [0]
+# Seconds a process spends on numpy queries before compiling the kernels pays: numba compiles this
+# module's and `geometry.penetration`'s kernels in 24 s of CPU once per machine (measured on the
+# demo at load 11-14: main's first run less its second), and a compiled query costs a small part of
+# a numpy one, so once numpy has cost about what the compile would, compiling pays. The demo's 20
+# steps spend a few seconds in numpy and never compile; a long run compiles once, for every later
+# run too. Wall seconds (reading a thread's CPU clock costs more here than a query), so a loaded
+# machine compiles sooner.
+PAYS_AFTER_S = 30.0
+_numpy_seconds = [0.0]
 _preferred: list[bool] = []
 _CHUNK = 1 << 21  # point-leaf pairs a numpy query holds at once (a few tens of MB)
 
 
 def compiled_pays(*kernels) -> bool:
-    """Whether the queries run compiled: once this process has compiled or loaded them, when this
-    module's kernels and `kernels` are all in numba's cache for this source (loading them costs a
-    fraction of a second), or once this process has answered PAYS_AFTER_POINTS points in numpy.
+    """Whether the queries run compiled: once this process has compiled or loaded them, when the
+    `kernels` they need are all in numba's cache for this source (loading them costs a
+    fraction of a second), or once this process has spent PAYS_AFTER_S of CPU on numpy queries.
     Both forms give the same numbers, so a run may switch at any point."""
     from orthosim.system.firstrun import in_numba_cache
 
-    return (bool(_preferred) or _numpy_points[0] > PAYS_AFTER_POINTS
-            or in_numba_cache(build_hierarchy, signed_distances, *kernels))
+    return bool(_preferred) or _numpy_seconds[0] > PAYS_AFTER_S or in_numba_cache(*kernels)
 
 
 def prefer_compiled() -> None:
@@ -554,9 +558,9 @@ def signed_distances_numpy(points, s, cap):
     """`signed_distances` in numpy, the same numbers: for each of the points (n, 3), its signed
     distance to the surface of `s` (mm, negative inside, +inf beyond `cap` mm) and the face holding
     its closest point (-1 beyond the cap). For a process that has not compiled the kernels yet."""
+    started = time.perf_counter()
     points = np.ascontiguousarray(points, float).reshape(-1, 3)
     n = len(points)
-    _numpy_points[0] += n
     out, faces = np.full(n, np.inf), np.full(n, -1, np.int64)
     leaves = np.flatnonzero(s.left < 0)
     step = max(1, _CHUNK // len(leaves))
@@ -577,6 +581,7 @@ def signed_distances_numpy(points, s, cap):
         outside = (Q[:, 0] - x) * normal[:, 0] + (Q[:, 1] - y) * normal[:, 1] + (Q[:, 2] - z) * normal[:, 2] > 0.0
         out[lo + near] = np.where(outside, 1.0, -1.0) * np.sqrt(best2[near])
         faces[lo + near] = f
+    _numpy_seconds[0] += time.perf_counter() - started
     return out, faces
 
 
@@ -636,3 +641,116 @@ def _hierarchy_shape(n: int, leaf_faces: int):
             todo.append((s + mid, e, k, 1, depth + 1))
             todo.append((s, s + mid, k, 0, depth + 1))
     return tuple(np.array(v, np.int64) for v in (start, end, level, left, right))
+
+
+# One point at a time (the depth searches' branch and bound asks one point a step), numpy's call
+# overhead outweighs its arithmetic: the kernel's own descent in plain Python floats (IEEE doubles,
+# the same operations in the same order, so the same bits, and the same face on ties by construction).
+_SCALAR_VIEWS: dict[int, tuple] = {}  # id(triangles) -> (triangles, the arrays as Python lists)
+
+
+def _scalar_view(s):
+    """The arrays of `s` as nested Python lists (reading a list item costs a fraction of an array's)."""
+    entry = _SCALAR_VIEWS.get(id(s.triangles))
+    if entry is None or entry[0] is not s.triangles:
+        if len(_SCALAR_VIEWS) > 256:
+            _SCALAR_VIEWS.clear()
+        lists = (s.triangles.reshape(-1, 9).tolist(), s.node_center.tolist(), s.node_radius.tolist(),
+                 s.node_lo.tolist(), s.node_hi.tolist(), s.left.tolist(), s.right.tolist(), s.start.tolist(),
+                 s.count.tolist())
+        entry = _SCALAR_VIEWS[id(s.triangles)] = (s.triangles, lists)
+    return entry[1]
+
+
+def closest_on_triangle_scalar(px, py, pz, t):
+    """`closest_on_triangle` of the point (px, py, pz) and the corners t (9 floats: a, b, c), in
+    Python floats: (feature, x, y, z)."""
+    ax, ay, az, bx, by, bz, cx, cy, cz = t
+    abx, aby, abz = bx - ax, by - ay, bz - az
+    acx, acy, acz = cx - ax, cy - ay, cz - az
+    qx, qy, qz = px - ax, py - ay, pz - az
+    d1, d2 = abx * qx + aby * qy + abz * qz, acx * qx + acy * qy + acz * qz
+    if d1 <= 0.0 and d2 <= 0.0:
+        return 1, ax, ay, az
+    qx, qy, qz = px - bx, py - by, pz - bz
+    d3, d4 = abx * qx + aby * qy + abz * qz, acx * qx + acy * qy + acz * qz
+    if d3 >= 0.0 and d4 <= d3:
+        return 2, bx, by, bz
+    qx, qy, qz = px - cx, py - cy, pz - cz
+    d5, d6 = abx * qx + aby * qy + abz * qz, acx * qx + acy * qy + acz * qz
+    if d6 >= 0.0 and d5 <= d6:
+        return 3, cx, cy, cz
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = d1 / (d1 - d3)
+        return 4, ax + v * abx, ay + v * aby, az + v * abz
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        w = d2 / (d2 - d6)
+        return 6, ax + w * acx, ay + w * acy, az + w * acz
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return 5, bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)
+    denom = 1.0 / (va + vb + vc)
+    v = vb * denom
+    w = vc * denom
+    return 0, ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
+
+
+def _node_gap_scalar(px, py, pz, view, k):
+    """`node_gap` in Python floats."""
+    _, center, radius, lo, hi = view[:5]
+    c, low, high = center[k], lo[k], hi[k]
+    dx, dy, dz = px - c[0], py - c[1], pz - c[2]
+    sphere = math.sqrt(dx * dx + dy * dy + dz * dz) - radius[k]
+    bx = max(low[0] - px, 0.0, px - high[0])
+    by = max(low[1] - py, 0.0, py - high[1])
+    bz = max(low[2] - pz, 0.0, pz - high[2])
+    return max(sphere, math.sqrt(bx * bx + by * by + bz * bz))
+
+
+def signed_distance_scalar(p, s, cap):
+    """`closest_face` of the one point p (3,) in Python floats: (signed distance mm, face)."""
+    started = time.perf_counter()
+    view = _scalar_view(s)
+    tri, left, right, start, count = view[0], view[5], view[6], view[7], view[8]
+    px, py, pz = float(p[0]), float(p[1]), float(p[2])
+    best2, best_i, best_feat, bx, by, bz = cap * cap, -1, 0, 0.0, 0.0, 0.0
+    stack = [(0, _node_gap_scalar(px, py, pz, view, 0))]
+    while stack:
+        k, gap = stack.pop()
+        if gap > 0.0 and gap * gap >= best2:
+            continue
+        if left[k] < 0:
+            for i in range(start[k], start[k] + count[k]):
+                feat, x, y, z = closest_on_triangle_scalar(px, py, pz, tri[i])
+                d2 = (px - x) * (px - x) + (py - y) * (py - y) + (pz - z) * (pz - z)
+                if d2 < best2:
+                    best2, best_i, best_feat, bx, by, bz = d2, i, feat, x, y, z
+            continue
+        l, r = left[k], right[k]
+        gl, gr = _node_gap_scalar(px, py, pz, view, l), _node_gap_scalar(px, py, pz, view, r)
+        if gl < gr:  # nearer child popped first
+            l, r, gl, gr = r, l, gr, gl
+        stack.append((l, gl))
+        stack.append((r, gr))
+    _numpy_seconds[0] += time.perf_counter() - started
+    if best_i < 0:
+        return math.inf, -1
+    f = int(s.order[best_i])
+    if best_feat == 0:
+        n = s.face_normals[f]
+    elif best_feat <= 3:
+        n = s.vertex_normals[s.faces[f, best_feat - 1]]
+    else:
+        n = s.edge_normals[s.face_edges[f, best_feat - 4]]
+    outside = (px - bx) * float(n[0]) + (py - by) * float(n[1]) + (pz - bz) * float(n[2]) > 0.0
+    return (1.0 if outside else -1.0) * math.sqrt(best2), f
+
+
+def distance_to_face_scalar(p, s, f) -> float:
+    """`distance_to_face` in Python floats: mm from p (3,) to face f of `s`."""
+    px, py, pz = float(p[0]), float(p[1]), float(p[2])
+    _, x, y, z = closest_on_triangle_scalar(px, py, pz, s.vertices[s.faces[f]].reshape(-1).tolist())
+    return math.sqrt((px - x) * (px - x) + (py - y) * (py - y) + (pz - z) * (pz - z))

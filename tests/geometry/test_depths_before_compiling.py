@@ -91,13 +91,13 @@ def test_interpenetration_depths_in_numpy_are_the_compiled_ones(paper_teeth, mon
 
 def test_a_process_answers_in_numpy_until_compiling_pays(monkeypatch):
     monkeypatch.setattr(signeddistance, "_preferred", [])
-    monkeypatch.setattr(signeddistance, "_numpy_points", [0])
-    monkeypatch.setattr(signeddistance, "PAYS_AFTER_POINTS", 100)
+    monkeypatch.setattr(signeddistance, "_numpy_seconds", [0.0])
+    monkeypatch.setattr(signeddistance, "PAYS_AFTER_S", 1e-9)
     monkeypatch.setattr("orthosim.system.firstrun.in_numba_cache", lambda *kernels: False)
-    assert not signeddistance.compiled_pays()
+    assert not signeddistance.compiled_pays(signed_distances)
     points = np.random.default_rng(1).normal(size=(101, 3))
     signed_distances_numpy(points, mesh_surface(trimesh.creation.icosphere(1, 1.0)).arrays, np.inf)
-    assert signeddistance.compiled_pays()  # enough numpy queries: now compiling pays
-    monkeypatch.setattr(signeddistance, "_numpy_points", [0])
+    assert signeddistance.compiled_pays(signed_distances)  # numpy has cost what compiling would: now compiling pays
+    monkeypatch.setattr(signeddistance, "_numpy_seconds", [0.0])
     signeddistance.prefer_compiled()
-    assert signeddistance.compiled_pays()
+    assert signeddistance.compiled_pays(signed_distances)
