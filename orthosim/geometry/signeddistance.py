@@ -646,20 +646,7 @@ def _hierarchy_shape(n: int, leaf_faces: int):
 # One point at a time (the depth searches' branch and bound asks one point a step), numpy's call
 # overhead outweighs its arithmetic: the kernel's own descent in plain Python floats (IEEE doubles,
 # the same operations in the same order, so the same bits, and the same face on ties by construction).
-_SCALAR_VIEWS: dict[int, tuple] = {}  # id(triangles) -> (triangles, the arrays as Python lists)
-
-
-def _scalar_view(s):
-    """The arrays of `s` as nested Python lists (reading a list item costs a fraction of an array's)."""
-    entry = _SCALAR_VIEWS.get(id(s.triangles))
-    if entry is None or entry[0] is not s.triangles:
-        if len(_SCALAR_VIEWS) > 256:
-            _SCALAR_VIEWS.clear()
-        lists = (s.triangles.reshape(-1, 9).tolist(), s.node_center.tolist(), s.node_radius.tolist(),
-                 s.node_lo.tolist(), s.node_hi.tolist(), s.left.tolist(), s.right.tolist(), s.start.tolist(),
-                 s.count.tolist())
-        entry = _SCALAR_VIEWS[id(s.triangles)] = (s.triangles, lists)
-    return entry[1]
+# Values are read with `ndarray.item` (no copy of the mesh's arrays is kept), a leaf's corners as a list.
 
 
 def closest_on_triangle_scalar(px, py, pz, t):
@@ -698,39 +685,38 @@ def closest_on_triangle_scalar(px, py, pz, t):
     return 0, ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
 
 
-def _node_gap_scalar(px, py, pz, view, k):
+def _node_gap_scalar(px, py, pz, s, k):
     """`node_gap` in Python floats."""
-    _, center, radius, lo, hi = view[:5]
-    c, low, high = center[k], lo[k], hi[k]
-    dx, dy, dz = px - c[0], py - c[1], pz - c[2]
-    sphere = math.sqrt(dx * dx + dy * dy + dz * dz) - radius[k]
-    bx = max(low[0] - px, 0.0, px - high[0])
-    by = max(low[1] - py, 0.0, py - high[1])
-    bz = max(low[2] - pz, 0.0, pz - high[2])
+    c, lo, hi = s.node_center, s.node_lo, s.node_hi
+    dx, dy, dz = px - c.item(k, 0), py - c.item(k, 1), pz - c.item(k, 2)
+    sphere = math.sqrt(dx * dx + dy * dy + dz * dz) - s.node_radius.item(k)
+    bx = max(lo.item(k, 0) - px, 0.0, px - hi.item(k, 0))
+    by = max(lo.item(k, 1) - py, 0.0, py - hi.item(k, 1))
+    bz = max(lo.item(k, 2) - pz, 0.0, pz - hi.item(k, 2))
     return max(sphere, math.sqrt(bx * bx + by * by + bz * bz))
 
 
 def signed_distance_scalar(p, s, cap):
     """`closest_face` of the one point p (3,) in Python floats: (signed distance mm, face)."""
     started = time.perf_counter()
-    view = _scalar_view(s)
-    tri, left, right, start, count = view[0], view[5], view[6], view[7], view[8]
+    left, right, start, count = s.left, s.right, s.start, s.count
     px, py, pz = float(p[0]), float(p[1]), float(p[2])
     best2, best_i, best_feat, bx, by, bz = cap * cap, -1, 0, 0.0, 0.0, 0.0
-    stack = [(0, _node_gap_scalar(px, py, pz, view, 0))]
+    stack = [(0, _node_gap_scalar(px, py, pz, s, 0))]
     while stack:
         k, gap = stack.pop()
         if gap > 0.0 and gap * gap >= best2:
             continue
-        if left[k] < 0:
-            for i in range(start[k], start[k] + count[k]):
-                feat, x, y, z = closest_on_triangle_scalar(px, py, pz, tri[i])
+        if left.item(k) < 0:
+            first = start.item(k)
+            for i, t in enumerate(s.triangles[first:first + count.item(k)].reshape(-1, 9).tolist(), first):
+                feat, x, y, z = closest_on_triangle_scalar(px, py, pz, t)
                 d2 = (px - x) * (px - x) + (py - y) * (py - y) + (pz - z) * (pz - z)
                 if d2 < best2:
                     best2, best_i, best_feat, bx, by, bz = d2, i, feat, x, y, z
             continue
-        l, r = left[k], right[k]
-        gl, gr = _node_gap_scalar(px, py, pz, view, l), _node_gap_scalar(px, py, pz, view, r)
+        l, r = left.item(k), right.item(k)
+        gl, gr = _node_gap_scalar(px, py, pz, s, l), _node_gap_scalar(px, py, pz, s, r)
         if gl < gr:  # nearer child popped first
             l, r, gl, gr = r, l, gr, gl
         stack.append((l, gl))
