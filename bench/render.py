@@ -404,18 +404,27 @@ def run_bench(case: str | Path | None = None, *, run_case=None, **options) -> di
 
 
 def _compile_descent(dentition) -> None:
-    """Compile (or load) the detectors' sphere-tree descent before anything is timed. The detectors
-    compile it only once that pays (`orthosim.collision.descent.compiled_descent`); on a fresh
-    install the bench would otherwise time the numpy descent, then numba's compiler, then the walk."""
+    """Compile (or load) the detectors' sphere-tree descent and the exact depth queries before
+    anything is timed. The detectors compile them only once that pays
+    (`orthosim.collision.descent.compiled_descent`, `orthosim.geometry.signeddistance.compiled_pays`);
+    on a fresh install the bench would otherwise time numpy, then numba's compiler, then the kernels."""
     from orthosim.collision import CollisionModel
     from orthosim.collision.continuous import swept_leaves
     from orthosim.collision.detect import default_pairs
     from orthosim.collision.discrete import overlapping_leaves
+    from orthosim.geometry.penetration import edge_penetration_depth
+    from orthosim.geometry.signeddistance import prefer_compiled
 
     model = CollisionModel.from_dentition(dentition)
     poses, pairs = model.pose_array(dentition.rest_poses()), model.pair_indices(default_pairs(model))
     overlapping_leaves(model, poses, pairs, compiled=True)
     swept_leaves(model, poses, poses, pairs, compiled=True)
+    prefer_compiled()
+    rest = dentition.rest_poses()
+    a, b = dentition.fdis[0], dentition.fdis[1]  # neighbours in the arch: b moved halfway onto a
+    into = rest[b].copy()
+    into[:3, 3] = 0.5 * (rest[a][:3, 3] + rest[b][:3, 3])
+    edge_penetration_depth(dentition.teeth[a].mesh, rest[a], dentition.teeth[b].mesh, into)
 
 
 def _before_gl(plan: BenchPlan, model: _BenchModel, run_case, failures: list) -> dict:

@@ -25,11 +25,13 @@ from orthosim.collision.detect import default_pairs
 from orthosim.collision.discrete import overlapping_leaves
 from orthosim.exchange.case import DEFAULT_CASE, load_case
 from orthosim.geometry.penetration import edge_penetration_depth, penetration_depth
+from orthosim.geometry.signeddistance import prefer_compiled
 from orthosim.movement.simulation import MovementModel, simulate
 from orthosim.spheretree import build_sphere_tree
 
 
 def warm_up() -> None:
+    prefer_compiled()  # the depth and distance queries stay in numpy until compiling pays: compile them here
     model = MovementModel.build(load_case(DEFAULT_CASE))
     for detector in ("continuous", "exact", "discrete", "circles"):
         for _ in simulate(model, detector, steps=3):

@@ -30,17 +30,24 @@ pseudonormal, exact for closed, consistently oriented meshes (`MeshSurface.close
 holds only the searches on top of them. Hand-written in numba: FCL answers no inside test and one
 closest pair per call, and trimesh's signed distance costs about a millisecond a point; this costs
 microseconds a point. Imported on demand only (numba's start-up is not for the drawing side):
-`orthosim.geometry` does not import it.
+`orthosim.geometry` does not import it. Until compiling pays (`signeddistance.compiled_pays`) the
+searches run in numpy (`_edge_depth_numpy` and the others beside the kernels): each branch and bound
+replayed in the kernel's order, on `signeddistance`'s numpy queries, so the depths are the same
+numbers bit for bit.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import trimesh
 from numba import njit
 
-from orthosim.geometry.signeddistance import (STACK, MeshSurface, closest_face, distance_to_face, mesh_surface,
-                                              signed_distances, surface_within)
+from orthosim.geometry.signeddistance import (STACK, MeshSurface, closest_face, closest_on_triangles_numpy, compiled_pays,
+                                              distance_to_face, distance_to_face_scalar, mesh_surface, node_gaps_numpy,
+                                              signed_distance_scalar, signed_distances, signed_distances_numpy,
+                                              squared_distances, surface_within)
 from orthosim.system.firstrun import announce_compiles
 
 DEPTH_TOLERANCE_MM = 0.01  # the surface depth is found to within this below the truth
@@ -257,7 +264,139 @@ def _ball_depth(points, normals, rmax, best, tol, own, other):
     return best
 
 
+# --------------------------------------------------------------------------------- the same in numpy
+
+
+def _depth_faces_numpy(points, s):
+    """`_depth_face` of each of the points (n, 3) in numpy: ((n,) mm inside `s`, (n,) faces)."""
+    d, f = signed_distances_numpy(points, s, np.inf)
+    return -d, f
+
+
+def _depth_face_scalar(p, s) -> tuple[float, int]:
+    """`_depth_face` of the one point p (3,) in Python floats: (mm inside `s`, face)."""
+    d, f = signed_distance_scalar(p, s, math.inf)
+    return -d, f
+
+
+def _farthest_from_face_numpy(corners, s, f) -> float:
+    """`_farthest_from_face` in Python floats: the largest distance from the corners (k, 3) to face f."""
+    far = 0.0
+    for corner in corners:
+        far = max(far, distance_to_face_scalar(corner, s, f))
+    return far
+
+
+def _reaching_faces_numpy(own, other, floor):
+    """`_reaching_faces` in numpy, the same faces: the hierarchy opened a level at a time (which
+    nodes are opened does not depend on the order they are asked in)."""
+    keep = np.zeros(own.faces.shape[0], np.bool_)
+    nodes = np.zeros(1, np.int64)
+    while len(nodes):
+        depth, _ = _depth_faces_numpy(own.node_center[nodes], other)
+        nodes = nodes[~(depth + own.node_radius[nodes] < floor)]
+        leaf = own.left[nodes] < 0
+        for k in nodes[leaf]:
+            keep[own.order[own.start[k]:own.start[k] + own.count[k]]] = True
+        nodes = np.stack([own.left[nodes[~leaf]], own.right[nodes[~leaf]]], axis=1).reshape(-1)
+    return keep
+
+
+def _edge_depth_numpy(segments, ends, best, tol, s):
+    """`_edge_depth` in numpy, the same number: its branch and bound replayed segment by segment in
+    the same order (each bound depends on the best depth found so far), one depth query a split."""
+    best = float(best)
+    for t in range(segments.shape[0]):
+        stack = [(segments[t, 0], segments[t, 1], float(ends[t, 0]), float(ends[t, 1]))]
+        while stack:
+            a, b, da, db = stack.pop()
+            dx, dy, dz = float(b[0] - a[0]), float(b[1] - a[1]), float(b[2] - a[2])
+            length = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if 0.5 * (da + db + length) <= best + tol:
+                continue
+            g = 0.5 * (a + b)
+            d, face = _depth_face_scalar(g, s)
+            if d > best:
+                best = d
+            if _farthest_from_face_numpy((a, b), s, face) <= best + tol:
+                continue
+            stack.append((a, g, da, d))
+            stack.append((g, b, d, db))
+    return best
+
+
+def _surface_depth_numpy(tris, best, tol, s):
+    """`_surface_depth` in numpy, the same number: its branch and bound replayed in the same order."""
+    best = float(best)
+    for t in range(tris.shape[0]):
+        stack = [(tris[t, 0], tris[t, 1], tris[t, 2])]
+        while stack:
+            a, b, c = stack.pop()
+            g = (a + b + c) / 3.0
+            r = max(_length(a - g), _length(b - g), _length(c - g))
+            d, face = _depth_face_scalar(g, s)
+            if d > best:
+                best = d
+            if d + r <= best + tol:
+                continue
+            if _farthest_from_face_numpy((a, b, c), s, face) <= best + tol:
+                continue
+            ab, bc, ca = 0.5 * (a + b), 0.5 * (b + c), 0.5 * (c + a)
+            stack.extend([(a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca)])
+    return best
+
+
+def _length(v) -> float:
+    """|v| mm of a (3,) vector, its squares summed x, then y, then z (as the kernels sum them)."""
+    x, y, z = float(v[0]), float(v[1]), float(v[2])
+    return math.sqrt(x * x + y * y + z * z)
+
+
+def _surface_within_numpy(p, rho: float, s) -> bool:
+    """`surface_within` in numpy: whether any point of the surface of `s` lies closer than rho to p."""
+    leaves = np.flatnonzero(s.left < 0)
+    near = leaves[node_gaps_numpy(p[None], s, leaves)[0] < rho]
+    if not len(near):
+        return False
+    rows = np.concatenate([np.arange(s.start[k], s.start[k] + s.count[k]) for k in near])
+    P = np.repeat(p[None], len(rows), axis=0)
+    _, x, y, z = closest_on_triangles_numpy(P, s.triangles[rows])
+    return bool(np.any(squared_distances(P, x, y, z) < rho * rho))
+
+
+def _ball_free_numpy(p, n, r: float, tol: float, own, other) -> bool:
+    """`_ball_free` in numpy."""
+    c = p - r * n
+    rho = max(r - tol, 0.0)
+    return not (_surface_within_numpy(c, rho, own) or _surface_within_numpy(c, rho, other))
+
+
+def _ball_depth_numpy(points, normals, rmax, best, tol, own, other):
+    """`_ball_depth` in numpy, the same number: the points' depths inside `other` asked at once (they
+    do not depend on the best found), each ball's bisection replayed in order."""
+    best = float(best)
+    depth, _ = _depth_faces_numpy(points, other)
+    for i in np.flatnonzero(~(depth < -tol)):
+        p, n = points[i], normals[i]
+        if not _ball_free_numpy(p, n, best + tol, tol, own, other):
+            continue
+        lo, hi = best + tol, float(rmax)
+        for _ in range(_BALL_STEPS):
+            mid = 0.5 * (lo + hi)
+            if _ball_free_numpy(p, n, mid, tol, own, other):
+                lo = mid
+            else:
+                hi = mid
+        c = p - lo * n
+        inside = min(_depth_face_scalar(c, own)[0], _depth_face_scalar(c, other)[0])
+        if inside > best:
+            best = inside
+    return best
+
+
 # --------------------------------------------------------------------------------- the measure
+
+_EDGE_KERNELS = (signed_distances, _depth_face, _depth, _edge_depth, _reaching_faces)  # what a step's depth compiles
 
 
 def _tangent_points(own: MeshSurface, faces: np.ndarray, verts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -279,16 +418,19 @@ def penetration_depth(mesh_a: trimesh.Trimesh, pose_a: np.ndarray, mesh_b: trime
     point inside the other solid. Poses: (4, 4) local -> common frame. Meshes must be closed and
     consistently oriented (outward normals), as the teeth are."""
     tol = float(tolerance_mm)
-    ways = _facing(mesh_a, pose_a, mesh_b, pose_b, tol)
+    compiled = compiled_pays(*_EDGE_KERNELS, _ball_depth, _surface_depth)
+    ways = _facing(mesh_a, pose_a, mesh_b, pose_b, tol, compiled)
     best = _vertex_depth(ways)
+    ball_depth = _ball_depth if compiled else _ball_depth_numpy
     for own, other, M, moved, faces, verts, _ in ways:  # balls: the coincident and nearly coincident surfaces
         if len(faces):
             other_here = other.moved(np.linalg.inv(M))  # other's arrays in own's frame
             pts, nrm = _tangent_points(own, faces, verts)
-            best = _ball_depth(pts, nrm, float(own.arrays.node_radius[0]), best, tol, own.arrays, other_here)
+            best = ball_depth(pts, nrm, float(own.arrays.node_radius[0]), best, tol, own.arrays, other_here)
+    surface_depth = _surface_depth if compiled else _surface_depth_numpy
     for own, other, _, moved, faces, *_ in ways:  # every point of the triangles that can reach inside
         if len(faces):
-            best = _surface_depth(np.ascontiguousarray(moved[own.arrays.faces[faces]]), best, tol, other.arrays)
+            best = surface_depth(np.ascontiguousarray(moved[own.arrays.faces[faces]]), best, tol, other.arrays)
     return float(best)
 
 
@@ -300,22 +442,23 @@ def edge_penetration_depth(mesh_a: trimesh.Trimesh, pose_a: np.ndarray, mesh_b: 
     inside, read their real depth (crossed ridges sunk d: d / sqrt(2)). Left to `penetration_depth`:
     a deepest point inside a face of both meshes, and coincident surfaces (the ball)."""
     tol = float(tolerance_mm)
-    ways = _facing(mesh_a, pose_a, mesh_b, pose_b, tol)
+    compiled = compiled_pays(*_EDGE_KERNELS)
+    ways = _facing(mesh_a, pose_a, mesh_b, pose_b, tol, compiled)
     best = _vertex_depth(ways)
     for own, other, _, moved, faces, verts, depths in ways:
         if len(faces):
             edges = own.edges[np.unique(own.face_edges[faces])]
             ends = np.searchsorted(verts, edges)  # verts: sorted, and holds every corner of these faces
-            best = _edge_depth(np.ascontiguousarray(moved[edges]), np.ascontiguousarray(depths[ends]), best, tol,
-                               other.arrays)
+            best = (_edge_depth if compiled else _edge_depth_numpy)(
+                np.ascontiguousarray(moved[edges]), np.ascontiguousarray(depths[ends]), best, tol, other.arrays)
     return float(best)
 
 
-def _facing(mesh_a, pose_a, mesh_b, pose_b, tol: float) -> list:
+def _facing(mesh_a, pose_a, mesh_b, pose_b, tol: float, compiled: bool = True) -> list:
     """Both ways (a in b, b in a): (own, other (their `MeshSurface`s), own -> other transform, own's
     vertices in other's frame, own's faces that can reach deeper than -tol inside other, their
     corners (sorted vertex indices) and the corners' depths inside other); empty when the root
-    spheres are apart."""
+    spheres are apart. compiled: numba's kernels, else their numpy forms (the same numbers)."""
     sa, sb = mesh_surface(mesh_a), mesh_surface(mesh_b)
     Ta, Tb = np.asarray(pose_a, float), np.asarray(pose_b, float)
     a_in_b = np.linalg.solve(Tb, Ta)  # a's local frame -> b's
@@ -328,9 +471,10 @@ def _facing(mesh_a, pose_a, mesh_b, pose_b, tol: float) -> list:
         R, t = M[:3, :3], M[:3, 3]
         moved = np.ascontiguousarray(own.arrays.vertices @ R.T + t)  # own's vertices in other's frame
         placed = own.arrays._replace(node_center=np.ascontiguousarray(own.arrays.node_center @ R.T + t))
-        faces = np.flatnonzero(_reaching_faces(placed, other.arrays, -tol))
+        faces = np.flatnonzero((_reaching_faces if compiled else _reaching_faces_numpy)(placed, other.arrays, -tol))
         verts = np.unique(own.arrays.faces[faces])
-        depths = -signed_distances(np.ascontiguousarray(moved[verts]), other.arrays, np.inf)[0]
+        query = signed_distances if compiled else signed_distances_numpy
+        depths = -query(np.ascontiguousarray(moved[verts]), other.arrays, np.inf)[0]
         ways.append((own, other, M, moved, faces, verts, depths))
     return ways
 

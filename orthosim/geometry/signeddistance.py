@@ -21,10 +21,19 @@ object pair per call; for the 240,000 crown vertices of a real dentition both ta
 this about one. Every compiled query takes the mesh as one argument, `SurfaceArrays` (a named tuple
 of arrays, which numba compiles and caches like its arrays). Imported on demand only (numba's
 start-up is not for the drawing side).
+
+Until compiling pays (`compiled_pays`: the kernels already in numba's cache, or enough queries
+answered in this process), the same queries run in numpy (`signed_distances_numpy`,
+`build_hierarchy_numpy`), so that a short first run on a fresh install never waits for numba's
+compiler. They give the very numbers the kernels give: the same IEEE operations per element in the
+same order, every face that could hold the closest point measured, and among equally near faces
+the one the kernel's descent meets first.
 """
 
 from __future__ import annotations
 
+import math
+import time
 import weakref
 from typing import NamedTuple
 
@@ -83,7 +92,8 @@ class MeshSurface:
         tri = V[F]
         centroids = tri.mean(axis=1)
         radii = np.linalg.norm(tri - centroids[:, None, :], axis=2).max(axis=1) * (1 + 1e-12) + 1e-12
-        tree = build_hierarchy(centroids, radii, tri.min(axis=1), tri.max(axis=1), LEAF_FACES)
+        build = build_hierarchy if compiled_pays(build_hierarchy) else build_hierarchy_numpy  # the same arrays
+        tree = build(centroids, radii, tri.min(axis=1), tri.max(axis=1), LEAF_FACES)
         self.arrays = SurfaceArrays(V, F, np.ascontiguousarray(tri[tree[-1]]), face_n, face_edges, edge_n, vert_n, *tree)
         lo, hi = V.min(axis=0), V.max(axis=0)
         self._sphere = (lo + hi) / 2, float(np.linalg.norm(V - (lo + hi) / 2, axis=1).max())
@@ -109,7 +119,8 @@ class MeshSurface:
         negative inside, +inf where no point of the surface lies within `cap_mm`; (n,) the face
         holding the closest point, -1 beyond the cap). A cap keeps far points cheap."""
         pts = np.ascontiguousarray(np.asarray(points, float).reshape(-1, 3))
-        return signed_distances(pts, self.arrays, float(cap_mm))
+        query = signed_distances if compiled_pays(signed_distances) else signed_distances_numpy  # the same numbers
+        return query(pts, self.arrays, float(cap_mm))
 
     def moved(self, M: np.ndarray) -> SurfaceArrays:
         """The arrays with the mesh moved by the rigid transform M (4, 4): corners, normals and
@@ -413,3 +424,319 @@ def surface_within(p, rho, s):
         stack[top], stack[top + 1] = s.left[k], s.right[k]
         top += 2
     return False
+
+
+# --------------------------------------------------------------------------------- the same in numpy
+
+# Seconds a process spends on numpy queries before compiling the kernels pays: numba compiles this
+# module's and `geometry.penetration`'s kernels in 24 s of CPU once per machine (measured on the
+# demo at load 11-14: main's first run less its second), and a compiled query costs a small part of
+# a numpy one, so once numpy has cost about what the compile would, compiling pays. The demo's 20
+# steps spend a few seconds in numpy and never compile; a long run compiles once, for every later
+# run too. Wall seconds (reading a thread's CPU clock costs more here than a query), so a loaded
+# machine compiles sooner.
+PAYS_AFTER_S = 30.0
+_numpy_seconds = [0.0]
+_preferred: list[bool] = []
+_CHUNK = 1 << 21  # point-leaf pairs a numpy query holds at once (a few tens of MB)
+
+
+def compiled_pays(*kernels) -> bool:
+    """Whether the queries run compiled: once this process has compiled or loaded them, when the
+    `kernels` they need are all in numba's cache for this source (loading them costs a
+    fraction of a second), or once this process has spent PAYS_AFTER_S of CPU on numpy queries.
+    Both forms give the same numbers, so a run may switch at any point."""
+    from orthosim.system.firstrun import in_numba_cache
+
+    return bool(_preferred) or _numpy_seconds[0] > PAYS_AFTER_S or in_numba_cache(*kernels)
+
+
+def prefer_compiled() -> None:
+    """From now on this process runs the queries compiled, compiling them on first use: for the
+    test suite's warm-up and the bench, which time the compiled queries as a warm machine runs them."""
+    _preferred.append(True)
+
+
+def closest_on_triangles_numpy(P, T):
+    """`closest_on_triangle` of each point P[i] (n, 3) and triangle T[i] (n, 3, 3), in numpy: (feature
+    (n,), x, y, z (n,) each). The same operations in the same order per element, so the same bits; a
+    branch is taken where the compiled one takes it (the first region whose test holds)."""
+    with np.errstate(all="ignore"):
+        ax, ay, az = T[:, 0, 0], T[:, 0, 1], T[:, 0, 2]
+        bx, by, bz = T[:, 1, 0], T[:, 1, 1], T[:, 1, 2]
+        cx, cy, cz = T[:, 2, 0], T[:, 2, 1], T[:, 2, 2]
+        abx, aby, abz = bx - ax, by - ay, bz - az
+        acx, acy, acz = cx - ax, cy - ay, cz - az
+
+        def along(x, y, z):
+            px, py, pz = P[:, 0] - x, P[:, 1] - y, P[:, 2] - z
+            return abx * px + aby * py + abz * pz, acx * px + acy * py + acz * pz
+
+        d1, d2 = along(ax, ay, az)
+        d3, d4 = along(bx, by, bz)
+        d5, d6 = along(cx, cy, cz)
+        vc = d1 * d4 - d3 * d2
+        vb = d5 * d2 - d1 * d6
+        va = d3 * d6 - d5 * d4
+        tests = [(d1 <= 0.0) & (d2 <= 0.0), (d3 >= 0.0) & (d4 <= d3), (d6 >= 0.0) & (d5 <= d6),
+                 (vc <= 0.0) & (d1 >= 0.0) & (d3 <= 0.0), (vb <= 0.0) & (d2 >= 0.0) & (d6 <= 0.0),
+                 (va <= 0.0) & ((d4 - d3) >= 0.0) & ((d5 - d6) >= 0.0)]
+        v_ab = d1 / (d1 - d3)
+        w_ca = d2 / (d2 - d6)
+        w_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        denom = 1.0 / (va + vb + vc)
+        v, w = vb * denom, vc * denom
+        feature = np.select(tests, [1, 2, 3, 4, 6, 5], 0)
+        xyz = [np.select(tests, [a, b, c, a + v_ab * ab, a + w_ca * ac, b + w_bc * (c - b)], a + ab * v + ac * w)
+               for a, b, c, ab, ac in ((ax, bx, cx, abx, acx), (ay, by, cy, aby, acy), (az, bz, cz, abz, acz))]
+    return feature, xyz[0], xyz[1], xyz[2]
+
+
+def squared_distances(P, x, y, z):
+    """|P - (x, y, z)|^2 per row, summed as the kernels sum it (x, then y, then z)."""
+    return (P[:, 0] - x) ** 2 + (P[:, 1] - y) ** 2 + (P[:, 2] - z) ** 2
+
+
+def node_gaps_numpy(P, s, nodes):
+    """`node_gap` of each point P (m, 3) to each of `nodes` (k,): (m, k) mm, the same bits."""
+    c, lo, hi = s.node_center[nodes], s.node_lo[nodes], s.node_hi[nodes]
+    d = [P[:, None, a] - c[None, :, a] for a in range(3)]
+    sphere = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) - s.node_radius[nodes]
+    b = [np.maximum(np.maximum(lo[None, :, a] - P[:, None, a], 0.0), P[:, None, a] - hi[None, :, a]) for a in range(3)]
+    return np.maximum(sphere, np.sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]))
+
+
+def _first_in_descent(p, s, tied):
+    """Of the tied rows of `triangles` (equally near p (3,)), the one `signed_distances` meets first:
+    its descent takes the nearer child first (the right one on a tie), a leaf's rows in order."""
+    k = 0
+    while s.left[k] >= 0:
+        l, r = s.left[k], s.right[k]
+        in_left = tied < s.start[r]  # the left child holds the first half of the node's rows
+        if in_left.all() or not in_left.any():  # all in one child: the order of the two cannot matter
+            k = l if in_left.all() else r
+            continue
+        gl, gr = node_gaps_numpy(p[None], s, np.array([l, r]))[0]
+        tied, k = (tied[in_left], l) if gl < gr else (tied[~in_left], r)
+    return int(tied.min())
+
+
+def _nearest_rows(P, s, leaves):
+    """For each point P (m, 3): the row of `triangles` holding its closest surface point and the
+    squared distance (the first met by the compiled descent among equally near rows). Candidates:
+    every leaf whose gap does not exceed the distance to the nearest-gap leaf's faces."""
+    gaps = node_gaps_numpy(P, s, leaves)
+    m = len(P)
+    nearest = np.argmin(gaps, axis=1)
+    first = leaves[nearest]
+    span = int(s.count[first].max())
+    rows = np.minimum(s.start[first][:, None] + np.arange(span), (s.start[first] + s.count[first] - 1)[:, None])
+    Pr = np.repeat(P, span, axis=0)
+    _, x, y, z = closest_on_triangles_numpy(Pr, s.triangles[rows.reshape(-1)])
+    bound = squared_distances(Pr, x, y, z).reshape(m, span).min(axis=1)
+    candidate = ~((gaps > 0.0) & (gaps * gaps > bound[:, None]))
+    candidate[np.arange(m), nearest] = True
+    point, leaf = np.nonzero(candidate)
+    count = s.count[leaves[leaf]]
+    point = np.repeat(point, count)
+    row = np.repeat(s.start[leaves[leaf]] - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
+    _, x, y, z = closest_on_triangles_numpy(P[point], s.triangles[row])
+    d2 = squared_distances(P[point], x, y, z)
+    best = np.full(m, np.inf)
+    np.minimum.at(best, point, d2)
+    at_best = np.flatnonzero(d2 == best[point])
+    tied_point, tied_row = point[at_best], row[at_best]  # sorted by point
+    first = np.searchsorted(tied_point, np.arange(m))
+    chosen = tied_row[first]
+    ties = np.diff(np.append(first, len(tied_point)))
+    for i in np.flatnonzero(ties > 1):  # equally near faces: the one the kernel's descent meets first
+        chosen[i] = _first_in_descent(P[i], s, tied_row[first[i]:first[i] + ties[i]])
+    return chosen, best
+
+
+def signed_distances_numpy(points, s, cap):
+    """`signed_distances` in numpy, the same numbers: for each of the points (n, 3), its signed
+    distance to the surface of `s` (mm, negative inside, +inf beyond `cap` mm) and the face holding
+    its closest point (-1 beyond the cap). For a process that has not compiled the kernels yet."""
+    started = time.perf_counter()
+    points = np.ascontiguousarray(points, float).reshape(-1, 3)
+    n = len(points)
+    out, faces = np.full(n, np.inf), np.full(n, -1, np.int64)
+    leaves = np.flatnonzero(s.left < 0)
+    step = max(1, _CHUNK // len(leaves))
+    for lo in range(0, n, step):
+        P = points[lo:lo + step]
+        row, best2 = _nearest_rows(P, s, leaves)
+        near = np.flatnonzero(best2 < cap * cap)
+        if not len(near):
+            continue
+        r = row[near]
+        feature, x, y, z = closest_on_triangles_numpy(P[near], s.triangles[r])
+        f = s.order[r]
+        normal = np.where((feature == 0)[:, None], s.face_normals[f],
+                          np.where(((feature >= 1) & (feature <= 3))[:, None],
+                                   s.vertex_normals[s.faces[f, np.clip(feature - 1, 0, 2)]],
+                                   s.edge_normals[s.face_edges[f, np.clip(feature - 4, 0, 2)]]))
+        Q = P[near]
+        outside = (Q[:, 0] - x) * normal[:, 0] + (Q[:, 1] - y) * normal[:, 1] + (Q[:, 2] - z) * normal[:, 2] > 0.0
+        out[lo + near] = np.where(outside, 1.0, -1.0) * np.sqrt(best2[near])
+        faces[lo + near] = f
+    _numpy_seconds[0] += time.perf_counter() - started
+    return out, faces
+
+
+def build_hierarchy_numpy(FC, FR, corner_lo, corner_hi, leaf_faces):
+    """`build_hierarchy` in numpy, the same arrays bit for bit. The tree's shape (each node's stretch
+    of faces, its children, the kernel's depth-first numbering) depends on the number of faces
+    alone; the faces' order is then settled a level at a time (sibling stretches are apart), each
+    node's centre summed face by face as the kernel sums it, each split by the same stable sort."""
+    start, end, level, left, right = _hierarchy_shape(FC.shape[0], leaf_faces)
+    k = len(start)
+    centers, radii = np.empty((k, 3)), np.empty(k)
+    lo, hi = np.empty((k, 3)), np.empty((k, 3))
+    order = np.arange(FC.shape[0])
+    for depth in range(int(level.max()) + 1):
+        nodes = np.flatnonzero(level == depth)
+        s, size = start[nodes], end[nodes] - start[nodes]
+        valid = np.arange(int(size.max()))[None, :] < size[:, None]  # (nodes, widest stretch)
+        faces = order[np.minimum(s[:, None] + np.arange(valid.shape[1]), len(order) - 1)]
+        fc = np.where(valid[..., None], FC[faces], 0.0)
+        c = np.cumsum(np.concatenate([np.zeros((len(nodes), 1, 3)), fc], axis=1), axis=1)[np.arange(len(nodes)), size]
+        c = c / size[:, None]
+        reach = np.sqrt((fc[..., 0] - c[:, None, 0]) ** 2 + (fc[..., 1] - c[:, None, 1]) ** 2
+                        + (fc[..., 2] - c[:, None, 2]) ** 2) + FR[faces]
+        r = np.maximum(np.where(valid, reach, -np.inf).max(axis=1), 0.0)
+        centers[nodes], radii[nodes] = c, r * (1 + 1e-12) + 1e-12
+        lo[nodes] = np.where(valid[..., None], corner_lo[faces], np.inf).min(axis=1)
+        hi[nodes] = np.where(valid[..., None], corner_hi[faces], -np.inf).max(axis=1)
+        split = size > leaf_faces
+        if np.any(split):
+            spread = np.where(valid[..., None], fc, -np.inf).max(axis=1) - np.where(valid[..., None], fc, np.inf).min(axis=1)
+            axis = np.argmax(spread[split], axis=1)
+            rows = faces[split]
+            key = np.where(valid[split], FC[rows, axis[:, None]], np.inf)
+            ranked = np.take_along_axis(rows, np.argsort(key, axis=1, kind="stable"), axis=1)
+            for i, node in enumerate(nodes[split]):
+                order[start[node]:end[node]] = ranked[i, :end[node] - start[node]]
+    return centers, radii, lo, hi, left, right, start, end - start, order
+
+
+def _hierarchy_shape(n: int, leaf_faces: int):
+    """The shape `build_hierarchy` gives n faces, in its numbering (depth first, left child first):
+    each node's stretch [start, end) of the faces' order, its depth, its children (-1: a leaf)."""
+    start, end, level, left, right = [], [], [], [], []
+    todo = [(0, n, -1, 0, 0)]
+    while todo:
+        s, e, parent, side, depth = todo.pop()
+        k = len(start)
+        start.append(s)
+        end.append(e)
+        level.append(depth)
+        left.append(-1)
+        right.append(-1)
+        if parent >= 0:
+            (left if side == 0 else right)[parent] = k
+        if e - s > leaf_faces:
+            mid = (e - s) // 2
+            todo.append((s + mid, e, k, 1, depth + 1))
+            todo.append((s, s + mid, k, 0, depth + 1))
+    return tuple(np.array(v, np.int64) for v in (start, end, level, left, right))
+
+
+# One point at a time (the depth searches' branch and bound asks one point a step), numpy's call
+# overhead outweighs its arithmetic: the kernel's own descent in plain Python floats (IEEE doubles,
+# the same operations in the same order, so the same bits, and the same face on ties by construction).
+# Values are read with `ndarray.item` (no copy of the mesh's arrays is kept), a leaf's corners as a list.
+
+
+def closest_on_triangle_scalar(px, py, pz, t):
+    """`closest_on_triangle` of the point (px, py, pz) and the corners t (9 floats: a, b, c), in
+    Python floats: (feature, x, y, z)."""
+    ax, ay, az, bx, by, bz, cx, cy, cz = t
+    abx, aby, abz = bx - ax, by - ay, bz - az
+    acx, acy, acz = cx - ax, cy - ay, cz - az
+    qx, qy, qz = px - ax, py - ay, pz - az
+    d1, d2 = abx * qx + aby * qy + abz * qz, acx * qx + acy * qy + acz * qz
+    if d1 <= 0.0 and d2 <= 0.0:
+        return 1, ax, ay, az
+    qx, qy, qz = px - bx, py - by, pz - bz
+    d3, d4 = abx * qx + aby * qy + abz * qz, acx * qx + acy * qy + acz * qz
+    if d3 >= 0.0 and d4 <= d3:
+        return 2, bx, by, bz
+    qx, qy, qz = px - cx, py - cy, pz - cz
+    d5, d6 = abx * qx + aby * qy + abz * qz, acx * qx + acy * qy + acz * qz
+    if d6 >= 0.0 and d5 <= d6:
+        return 3, cx, cy, cz
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = d1 / (d1 - d3)
+        return 4, ax + v * abx, ay + v * aby, az + v * abz
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        w = d2 / (d2 - d6)
+        return 6, ax + w * acx, ay + w * acy, az + w * acz
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return 5, bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)
+    denom = 1.0 / (va + vb + vc)
+    v = vb * denom
+    w = vc * denom
+    return 0, ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
+
+
+def _node_gap_scalar(px, py, pz, s, k):
+    """`node_gap` in Python floats."""
+    c, lo, hi = s.node_center, s.node_lo, s.node_hi
+    dx, dy, dz = px - c.item(k, 0), py - c.item(k, 1), pz - c.item(k, 2)
+    sphere = math.sqrt(dx * dx + dy * dy + dz * dz) - s.node_radius.item(k)
+    bx = max(lo.item(k, 0) - px, 0.0, px - hi.item(k, 0))
+    by = max(lo.item(k, 1) - py, 0.0, py - hi.item(k, 1))
+    bz = max(lo.item(k, 2) - pz, 0.0, pz - hi.item(k, 2))
+    return max(sphere, math.sqrt(bx * bx + by * by + bz * bz))
+
+
+def signed_distance_scalar(p, s, cap):
+    """`closest_face` of the one point p (3,) in Python floats: (signed distance mm, face)."""
+    started = time.perf_counter()
+    left, right, start, count = s.left, s.right, s.start, s.count
+    px, py, pz = float(p[0]), float(p[1]), float(p[2])
+    best2, best_i, best_feat, bx, by, bz = cap * cap, -1, 0, 0.0, 0.0, 0.0
+    stack = [(0, _node_gap_scalar(px, py, pz, s, 0))]
+    while stack:
+        k, gap = stack.pop()
+        if gap > 0.0 and gap * gap >= best2:
+            continue
+        if left.item(k) < 0:
+            first = start.item(k)
+            for i, t in enumerate(s.triangles[first:first + count.item(k)].reshape(-1, 9).tolist(), first):
+                feat, x, y, z = closest_on_triangle_scalar(px, py, pz, t)
+                d2 = (px - x) * (px - x) + (py - y) * (py - y) + (pz - z) * (pz - z)
+                if d2 < best2:
+                    best2, best_i, best_feat, bx, by, bz = d2, i, feat, x, y, z
+            continue
+        l, r = left.item(k), right.item(k)
+        gl, gr = _node_gap_scalar(px, py, pz, s, l), _node_gap_scalar(px, py, pz, s, r)
+        if gl < gr:  # nearer child popped first
+            l, r, gl, gr = r, l, gr, gl
+        stack.append((l, gl))
+        stack.append((r, gr))
+    _numpy_seconds[0] += time.perf_counter() - started
+    if best_i < 0:
+        return math.inf, -1
+    f = int(s.order[best_i])
+    if best_feat == 0:
+        n = s.face_normals[f]
+    elif best_feat <= 3:
+        n = s.vertex_normals[s.faces[f, best_feat - 1]]
+    else:
+        n = s.edge_normals[s.face_edges[f, best_feat - 4]]
+    outside = (px - bx) * float(n[0]) + (py - by) * float(n[1]) + (pz - bz) * float(n[2]) > 0.0
+    return (1.0 if outside else -1.0) * math.sqrt(best2), f
+
+
+def distance_to_face_scalar(p, s, f) -> float:
+    """`distance_to_face` in Python floats: mm from p (3,) to face f of `s`."""
+    px, py, pz = float(p[0]), float(p[1]), float(p[2])
+    _, x, y, z = closest_on_triangle_scalar(px, py, pz, s.vertices[s.faces[f]].reshape(-1).tolist())
+    return math.sqrt((px - x) * (px - x) + (py - y) * (py - y) + (pz - z) * (pz - z))

@@ -120,3 +120,24 @@ def announce_compiles() -> None:
     notice = Notice()
     _listening.append(notice)
     event.register("numba:compile", notice)
+
+
+_cached: dict[int, bool] = {}  # id of a kernel -> whether numba's cache held it when first asked
+
+
+def in_numba_cache(*kernels) -> bool:
+    """Whether each of the numba `kernels` runs without compiling: compiled in this process already,
+    or in numba's cache for its source (numba's own index check: source stamp and entries; asked
+    once a process). Any doubt reads as False, and a kernel not in the cache stays so for this
+    process (a kernel compiled meanwhile by another process is found by the next)."""
+    for kernel in kernels:
+        if kernel.signatures:
+            continue
+        if id(kernel) not in _cached:
+            try:
+                _cached[id(kernel)] = bool(kernel._cache._cache_file._load_index())
+            except Exception:  # noqa: BLE001: a numba without this layout, or no cache: not cached
+                _cached[id(kernel)] = False
+        if not _cached[id(kernel)]:
+            return False
+    return True
