@@ -40,8 +40,10 @@ if [ ! -x .venv/bin/uv ]; then
 fi
 # --compile-bytecode (the tests, CI): imports read ready .pyc files instead of compiling every module on
 # every run where __pycache__ cannot be written (or PYTHONDONTWRITEBYTECODE is set): seconds per start.
-# The demo's own .venv is writable, so it skips it: compiling all 8,143 modules of its dependencies
-# took 38.6 s of CPU (2026-11-28, load 12), where the demo imports 717 and Python writes their .pyc.
+# The demo skips it: compiling all 8,143 modules of its dependencies took 38.6 s of CPU (2026-11-28,
+# load 12), where the demo imports 717; the demo writes their .pyc itself as it imports them (its
+# PYTHONDONTWRITEBYTECODE dropped below: with it set and no .pyc, every later start compiled its
+# imports again, 2.0 -> 4.0-4.9 s for `import orthosim.movement.simulation` on 2026-11-28).
 if [ "$action" = demo ]; then extra=""; stamp=.venv/.orthosim-installed-demo; compile=""
 else extra="[test]"; stamp=.venv/.orthosim-installed; compile="--compile-bytecode"; fi
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
@@ -64,7 +66,7 @@ fi
 
 case "$action" in
     install) echo "dev.sh: installed; run .venv/bin/orthosim --help" ;;
-    demo) exec .venv/bin/orthosim demo "$@" ;;
+    demo) exec env -u PYTHONDONTWRITEBYTECODE .venv/bin/orthosim demo "$@" ;;
     # pytest-xdist: one worker per core, each module on one worker (its module-wide set-ups built once)
     # the same arithmetic on every x86-64 machine for the bit-exact step guard and goldens (tests/conftest.py)
     test) export NPY_DISABLE_CPU_FEATURES="${NPY_DISABLE_CPU_FEATURES-X86_V4 AVX512F AVX512CD AVX512_SKX AVX512_CLX AVX512_CNL AVX512_ICL AVX512_SPR}"
