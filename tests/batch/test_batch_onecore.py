@@ -31,6 +31,15 @@ VOLATILE = {"wall_s", "fps", "render_fps", "case_file", "outputs"}
 BARE = RunOptions(render=RenderOptions(size=(48, 32), frames_per_step=1))
 
 
+@pytest.fixture(autouse=True)
+def _this_pytest_worker_keeps_its_threads(monkeypatch):
+    """`run_for_batch` on one core keeps its process to one thread for good (a batch worker's
+    whole life); run here in the pytest worker, that must end with the test."""
+    from orthosim.system import firstrun
+
+    monkeypatch.setattr(firstrun, "_one_thread", [])
+
+
 @pytest.fixture(scope="module")
 def case_file(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("cases") / "small.toml"

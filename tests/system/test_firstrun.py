@@ -25,10 +25,18 @@ class _Watched(io.StringIO):
         return super().write(text)
 
 
+def _fresh_process_state(monkeypatch):
+    """What a fresh `orthosim` process starts with: nothing said yet, neither hushed nor kept to one
+    thread (a batch test that ran `run_for_batch` on one core in this pytest worker leaves it so)."""
+    monkeypatch.setattr(firstrun, "_said", set())
+    monkeypatch.setattr(firstrun, "_hushed", [])
+    monkeypatch.setattr(firstrun, "_one_thread", [])
+
+
 def test_a_step_still_running_after_the_threshold_says_what_it_prepares_once(monkeypatch):
     stream = _Watched()
     monkeypatch.setattr(sys, "stderr", stream)
-    monkeypatch.setattr(firstrun, "_said", set())
+    _fresh_process_state(monkeypatch)
     for _ in range(2):
         with firstrun.preparing("the sphere trees of 3 tooth shapes", after_s=0.01):
             assert stream.written.wait(120)  # the line comes while the step still runs
@@ -39,7 +47,7 @@ def test_a_step_still_running_after_the_threshold_says_what_it_prepares_once(mon
 def test_a_step_that_ends_before_the_threshold_says_nothing(monkeypatch):
     stream = _Watched()
     monkeypatch.setattr(sys, "stderr", stream)
-    monkeypatch.setattr(firstrun, "_said", set())
+    _fresh_process_state(monkeypatch)
     with firstrun.preparing("the teeth of this model", after_s=600):
         pass
     assert stream.getvalue() == ""
