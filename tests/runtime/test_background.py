@@ -189,7 +189,10 @@ def test_ctrl_c_during_a_rendered_run_stops_it_in_one_line_and_leaves_no_process
     out = tmp_path / "o"
     proc = subprocess.Popen([sys.executable, "-c", "from orthosim.cli import entry; entry()", "run",
                              "cases/case1_first_premolar_extraction.toml", "--out", str(out)],
-                            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            # as from a terminal: SIGINT at its default, whatever this pytest worker inherited
+                            # (an ignored signal stays ignored across exec; the run then ended with 0)
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 120
         # the run writes into a staging folder beside `out` (orthosim.runtime.outputfolder)
