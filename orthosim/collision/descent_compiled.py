@@ -185,23 +185,20 @@ if AVAILABLE:
         return res[:m]
 
 
+_KERNELS = (_pack, _swept_bounds, _grow, _append, _overlap, _walk) if AVAILABLE else ()
+
+
 def kernels_loaded() -> bool:
     """Whether every kernel of the walk is compiled or loaded in this process already (no file read)."""
-    return all(kernel.signatures for kernel in (_pack, _swept_bounds, _grow, _append, _overlap, _walk))
+    return all(kernel.signatures for kernel in _KERNELS)
 
 
 def kernels_ready() -> bool:
     """Whether the walk runs without compiling: each kernel compiled in this process already, or
-    in numba's cache for this source (its index holds an entry). Any doubt reads as False."""
-    for kernel in (_pack, _swept_bounds, _grow, _append, _overlap, _walk):
-        if kernel.signatures:
-            continue
-        try:
-            if not kernel._cache._cache_file._load_index():  # numba's own check: source stamp, entries
-                return False
-        except Exception:  # noqa: BLE001: a numba without this layout: treat as not cached
-            return False
-    return True
+    in numba's cache for this source (`orthosim.system.firstrun.in_numba_cache`)."""
+    from orthosim.system.firstrun import in_numba_cache
+
+    return in_numba_cache(*_KERNELS)
 
 
 def _stack_size(model) -> int:
