@@ -21,6 +21,8 @@ process), `geometry`, `model` (teeth and dentitions), `spheretree` and `mechanic
 composition root).
 """
 
+from orthosim.system.lazy import lazy_names
+
 __version__ = "0.1.0"
 
 # the public names and the modules that define them, imported on first use (PEP 562)
@@ -35,16 +37,7 @@ _FROM = {
     "OrthosimError": "orthosim.errors",
 }
 __all__ = ["__version__", *sorted(_FROM)]
-
-
-def __getattr__(name: str):
-    if name not in _FROM:
-        raise AttributeError(f"module 'orthosim' has no attribute {name!r}")
-    import importlib
-
-    value = getattr(importlib.import_module(_FROM[name]), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_names(__name__, _FROM)
 
 
 def __dir__() -> list[str]:

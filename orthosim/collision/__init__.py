@@ -14,6 +14,8 @@ overlapping leaves) and `trianglepairs` (its compiled test of triangle pairs wit
 `orthosim.geometry.motion`; the detector timings are `orthosim_bench.collision`.
 """
 
+from orthosim.system.lazy import lazy_names
+
 # The package's names, imported on first use (PEP 562): `orthosim.collision.detectors` is read by
 # the case format and the command line, which must not pull FCL, numba and scipy in with it.
 _FROM = {
@@ -32,14 +34,5 @@ _FROM = {
     "first_time_of_contact": "orthosim.collision.time_of_contact",
 }
 __all__ = sorted(_FROM)
-
-
-def __getattr__(name: str):
-    if name not in _FROM:
-        raise AttributeError(f"module 'orthosim.collision' has no attribute {name!r}")
-    import importlib
-
-    value = getattr(importlib.import_module(_FROM[name]), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_names(__name__, _FROM)
 

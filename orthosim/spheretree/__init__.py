@@ -9,6 +9,8 @@ many meshes over every core), `sph` (`read_sph` / `write_sph`: Bradshaw's Sphere
 Toolkit format), `measure` (`measure_tree`: the paper's sphere outside volume and the coverage).
 """
 
+from orthosim.system.lazy import lazy_names
+
 # The package's names, imported on first use (PEP 562): a run that loads its trees from the cache
 # (`cache`) must not pull the optimising builder (numba, scipy) in with `orthosim.spheretree`.
 _FROM = {
@@ -17,14 +19,5 @@ _FROM = {
     "FitReport": "orthosim.spheretree.measure", "measure_tree": "orthosim.spheretree.measure",
     "read_sph": "orthosim.spheretree.sph", "write_sph": "orthosim.spheretree.sph",
 }
-__all__ = ["SphereTree", "build_sphere_tree", "cached_sphere_tree", "cached_sphere_trees", "measure_tree", "FitReport", "read_sph", "write_sph"]
-
-
-def __getattr__(name: str):
-    if name not in _FROM:
-        raise AttributeError(f"module 'orthosim.spheretree' has no attribute {name!r}")
-    import importlib
-
-    value = getattr(importlib.import_module(_FROM[name]), name)
-    globals()[name] = value
-    return value
+__all__ = sorted(_FROM)
+__getattr__ = lazy_names(__name__, _FROM)
