@@ -8,9 +8,11 @@ the parametric teeth alone.
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 # The step guard and the goldens are bit-exact, so the suite computes with the same arithmetic on
@@ -45,6 +47,28 @@ _fast_seconds: dict[str, float] = {}
 _outcomes: dict[str, str] = {}
 _damaged_entries: dict[str, int] = {}  # kind of cache entry -> damaged copies a test loaded (tests/storage/test_damaged_entries.py)
 _edited_certificates: dict[str, int] = {}  # kind of certified figure -> edited certificates verify was shown (tests/staging/)
+
+
+# How this pytest process started to handle Ctrl-C and SIGTERM (a worker fresh from pytest-xdist:
+# Python's defaults). A child process inherits an ignored signal across exec, so a test that left
+# SIGINT ignored here made later tests' `orthosim run` children ignore Ctrl-C and SIGTERM alike.
+_START_SIGNALS = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+
+def _restore_signals(when: str, nodeid: str) -> None:
+    for sig, handler in _START_SIGNALS.items():
+        if signal.getsignal(sig) is not handler:
+            warnings.warn(f"{nodeid}: {sig.name} found changed {when} the test; set back as this process started")
+            signal.signal(sig, handler)
+
+
+@pytest.fixture(autouse=True)
+def _signals_as_the_process_started(request):
+    """Each test starts, and leaves, with the signal dispositions this process started with; one
+    whose set-up or call changed them is named in a warning."""
+    _restore_signals("before", request.node.nodeid)
+    yield
+    _restore_signals("after", request.node.nodeid)
 
 
 @pytest.fixture
