@@ -35,12 +35,14 @@ from __future__ import annotations
 import math
 import time
 import weakref
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 import trimesh
 from numba import njit
 
+from orthosim.storage import numpytally
 from orthosim.system.firstrun import announce_compiles
 
 LEAF_FACES = 8  # faces in a leaf of the hierarchy
@@ -435,8 +437,12 @@ def surface_within(p, rho, s):
 # steps spend a few seconds in numpy and never compile; a long run compiles once, for every later
 # run too. Wall seconds (reading a thread's CPU clock costs more here than a query), so a loaded
 # machine compiles sooner.
+# The seconds count across runs too (`orthosim.storage.numpytally`): about the twentieth demo
+# compiles, not never.
 PAYS_AFTER_S = 30.0
 _numpy_seconds = [0.0]
+TALLY = "signed-distance-numpy-s"  # the counter of numpy seconds in the tally of earlier runs
+_KERNEL_SOURCES = (__file__, str(Path(__file__).with_name("penetration.py")))
 _preferred: list[bool] = []
 _CHUNK = 1 << 21  # point-leaf pairs a numpy query holds at once (a few tens of MB)
 
@@ -444,11 +450,21 @@ _CHUNK = 1 << 21  # point-leaf pairs a numpy query holds at once (a few tens of 
 def compiled_pays(*kernels) -> bool:
     """Whether the queries run compiled: once this process has compiled or loaded them, when the
     `kernels` they need are all in numba's cache for this source (loading them costs a
-    fraction of a second), or once this process has spent PAYS_AFTER_S of CPU on numpy queries.
-    Both forms give the same numbers, so a run may switch at any point."""
+    fraction of a second), or once this process and the earlier runs of the tally
+    (`orthosim.storage.numpytally`) have spent PAYS_AFTER_S on numpy queries. Both forms give
+    the same numbers, so a run may switch at any point."""
     from orthosim.system.firstrun import in_numba_cache
 
-    return bool(_preferred) or _numpy_seconds[0] > PAYS_AFTER_S or in_numba_cache(*kernels)
+    if _preferred or in_numba_cache(*kernels):
+        return True
+    return _numpy_seconds[0] + numpytally.carried(TALLY, *_KERNEL_SOURCES) > PAYS_AFTER_S
+
+
+def _spent_numpy(started: float) -> None:
+    """Count the numpy seconds since `started`, for this process and the tally of later runs."""
+    seconds = time.perf_counter() - started
+    _numpy_seconds[0] += seconds
+    numpytally.spend(TALLY, seconds, *_KERNEL_SOURCES)
 
 
 def prefer_compiled() -> None:
@@ -581,7 +597,7 @@ def signed_distances_numpy(points, s, cap):
         outside = (Q[:, 0] - x) * normal[:, 0] + (Q[:, 1] - y) * normal[:, 1] + (Q[:, 2] - z) * normal[:, 2] > 0.0
         out[lo + near] = np.where(outside, 1.0, -1.0) * np.sqrt(best2[near])
         faces[lo + near] = f
-    _numpy_seconds[0] += time.perf_counter() - started
+    _spent_numpy(started)
     return out, faces
 
 
@@ -721,7 +737,7 @@ def signed_distance_scalar(p, s, cap):
             l, r, gl, gr = r, l, gr, gl
         stack.append((l, gl))
         stack.append((r, gr))
-    _numpy_seconds[0] += time.perf_counter() - started
+    _spent_numpy(started)
     if best_i < 0:
         return math.inf, -1
     f = int(s.order[best_i])

@@ -39,6 +39,7 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, 
     shared: `dentition` is drawn meanwhile by another thread of this process (its meshes' caches
     are then left alone)."""
     from orthosim.runtime.background import release_freed_heap
+    from orthosim.storage.numpytally import keep as keep_numpy_tally
     from orthosim.collision import CollisionModel, ExactQueries
     from orthosim.analysis.metrics import occlusion_summary
     from orthosim.movement.report import DISTANCES_PER_STEP_FILE, STEPS_FILE, RunReport
@@ -66,6 +67,7 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, 
     for record in report.collect(simulate(model, detector, queries=queries)):
         yield record
     report.finish_streams(out_dir)
+    keep_numpy_tally()  # what it spent in numpy, for later runs (a forked child ends with os._exit: no atexit)
     metrics = report.metrics()
     metrics["model"] = {"kind": case.model.kind, **model_summary(dent)}  # every model says what it is (the schema asks)
     metrics["occlusion"] = occlusion_summary(dent)  # the initial model's

@@ -94,6 +94,7 @@ def test_a_process_answers_in_numpy_until_compiling_pays(monkeypatch):
     monkeypatch.setattr(signeddistance, "_numpy_seconds", [0.0])
     monkeypatch.setattr(signeddistance, "PAYS_AFTER_S", 1e-9)
     monkeypatch.setattr("orthosim.system.firstrun.in_numba_cache", lambda *kernels: False)
+    monkeypatch.setattr("orthosim.storage.numpytally.carried", lambda *counter: 0.0)  # no earlier run spent any
     assert not signeddistance.compiled_pays(signed_distances)
     points = np.random.default_rng(1).normal(size=(101, 3))
     signed_distances_numpy(points, mesh_surface(trimesh.creation.icosphere(1, 1.0)).arrays, np.inf)
