@@ -6,7 +6,7 @@ in a fraction of a second. So that a new user never watches a silent terminal (o
 than two seconds, each such step runs inside `preparing(what)`: when it is still running after
 `NOTICE_AFTER_S`, one line goes to stderr, whether or not stderr is a terminal,
 
-    orthosim: preparing the sphere trees of 28 teeth (first run only: kept in the cache for later runs)
+    orthosim: preparing the sphere trees of 28 teeth (once: kept in the cache for later runs)
 
 once per process for each `what`; a step that ends sooner (a warm cache, a small model) says
 nothing. `announce_compiles()` does the same for numba's compiler: numba emits its
@@ -35,7 +35,7 @@ def _say(what: str) -> None:
         if what in _said or _hushed:
             return
         _said.add(what)
-    print(f"orthosim: preparing {what} (first run only: kept in the cache for later runs)", file=sys.stderr, flush=True)
+    print(f"orthosim: preparing {what} (once: kept in the cache for later runs)", file=sys.stderr, flush=True)
 
 
 def keep_to_one_thread() -> None:

@@ -41,7 +41,7 @@ def test_a_step_still_running_after_the_threshold_says_what_it_prepares_once(mon
         with firstrun.preparing("the sphere trees of 3 tooth shapes", after_s=0.01):
             assert stream.written.wait(120)  # the line comes while the step still runs
     assert stream.getvalue() == ("orthosim: preparing the sphere trees of 3 tooth shapes "
-                                 "(first run only: kept in the cache for later runs)\n")
+                                 "(once: kept in the cache for later runs)\n")
 
 
 def test_a_step_that_ends_before_the_threshold_says_nothing(monkeypatch):
@@ -83,5 +83,5 @@ def test_a_kernel_compiled_for_this_machine_says_so_and_one_loaded_from_the_cach
 
     first, second = stderr_of_a_run(), stderr_of_a_run()
     assert first.splitlines() == ["orthosim: preparing the compiled kernels for this machine "
-                                  "(first run only: kept in the cache for later runs)"]
+                                  "(once: kept in the cache for later runs)"]
     assert second == ""
