@@ -35,11 +35,13 @@ from __future__ import annotations
 import math
 import time
 import weakref
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
-import trimesh
 from numba import njit
+
+if TYPE_CHECKING:  # a mesh's two arrays are all it reads: a run's child never imports trimesh for a depth
+    import trimesh
 
 from orthosim.system.firstrun import announce_compiles
 
