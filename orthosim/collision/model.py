@@ -9,17 +9,18 @@ numpy. A step's state is just the poses (dict FDI -> (4, 4) local -> arch frame,
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Callable, Mapping
+from typing import TYPE_CHECKING, Callable, Mapping
 
 import numpy as np
-import trimesh
-from scipy.spatial import ConvexHull
-from trimesh.nsphere import minimum_nsphere
 
 from orthosim.spheretree.tree import SphereTree
 from orthosim.collision.contract import CollisionError
+
+if TYPE_CHECKING:  # a run's first step reads only the meshes' arrays: trimesh and scipy load when the circles ask
+    import trimesh
 
 
 # mm added to radii in float32 tests: float32 rounding of arch-frame coordinates (|x| < 100 mm)
@@ -207,16 +208,9 @@ class CollisionModel:
         With neither, the project's cached builder (`orthosim.spheretree.cached_sphere_trees`, method
         "fit", its default branching x 4 levels) builds or loads them all at once, over every core.
         """
-        import sys
-
-        from tqdm import tqdm
-
         given = dict(trees or {})
         todo = [n for n in dentition.fdis if n not in given]
-        # A first run on a machine builds the trees (seconds for 28 smooth teeth, on every core);
-        # cached ones load in milliseconds, and the bar only appears once the work has lasted a second.
-        with tqdm(total=len(todo), desc="sphere trees", unit="tooth", delay=1.0, leave=False,
-                  disable=not sys.stderr.isatty()) as bar:
+        with _tree_bar(len(todo)) as bar:
             if tree_builder is None:
                 from orthosim.spheretree import cached_sphere_trees
 
@@ -230,6 +224,24 @@ class CollisionModel:
         bodies = [Body(n, dentition.teeth[n].mesh, given[n], np.asarray(dentition.teeth[n].rest_pose, float),
                        dentition.teeth[n].crown_vertices) for n in dentition.fdis]
         return cls(bodies)
+
+
+def _tree_bar(total: int):
+    """A bar over the teeth whose trees are built, on a terminal; a first run on a machine builds
+    them (seconds for 28 smooth teeth, on every core), cached ones load in milliseconds, and the
+    bar only appears once the work has lasted a second. Elsewhere nothing, and tqdm is not imported."""
+    import sys
+
+    if not sys.stderr.isatty():
+        return contextlib.nullcontext(_NoBar())
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc="sphere trees", unit="tooth", delay=1.0, leave=False)
+
+
+class _NoBar:
+    def update(self, n: int = 1) -> None:
+        pass
 
 
 def default_tree_builder() -> Callable[[trimesh.Trimesh], SphereTree]:
@@ -248,6 +260,9 @@ class _CircleData:
 
 def _circle_data(bodies: list[Body]) -> _CircleData:
     """Per body, the smallest circle holding the x-z projection of its circle points at rest."""
+    from scipy.spatial import ConvexHull
+    from trimesh.nsphere import minimum_nsphere
+
     centers, r_plane, half_height = [], [], []
     for b in bodies:
         R, p = b.rest_pose[:3, :3], b.rest_pose[:3, 3]

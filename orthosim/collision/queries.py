@@ -45,13 +45,16 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Iterable, Mapping
+from typing import TYPE_CHECKING, Iterable, Mapping
 
 import numpy as np
-import trimesh
 
 from orthosim.geometry import meshquery
+from orthosim.geometry.lazymesh import LazyMesh
 from orthosim.collision.model import CollisionModel
+
+if TYPE_CHECKING:  # the queries read the meshes' arrays; trimesh loads only for a depth (meshquery, penetration)
+    import trimesh
 
 APART_MARGIN_MM = 1e-6  # a pair proved apart by less than this is tested with FCL all the same
 PATCH_REACH_MM = 0.5  # a pair's patches hold every face within this of the other tooth when cut
@@ -298,7 +301,8 @@ class ExactQueries:
         """Body i's face centroids (f, 3) and corner radii (f,), mm, local frame."""
         known = self._faces.get(i)
         if known is None:
-            corners = np.asarray(self.model.bodies[i].mesh.triangles, float)  # (f, 3, 3)
+            mesh = self.model.bodies[i].mesh  # its arrays, as trimesh's `triangles` takes them (no trimesh made for it)
+            corners = np.asarray(mesh.vertices, float)[np.asarray(mesh.faces)]  # (f, 3, 3)
             centroids = corners.mean(axis=1)
             radii = np.linalg.norm(corners - centroids[:, None, :], axis=2).max(axis=1)
             known = self._faces[i] = (centroids, radii * (1 + 1e-9) + 1e-9)  # outward rounding
@@ -347,11 +351,12 @@ class ExactQueries:
         return value
 
 
-def _submesh(mesh: trimesh.Trimesh, faces: np.ndarray) -> trimesh.Trimesh:
+def _submesh(mesh: trimesh.Trimesh, faces: np.ndarray) -> LazyMesh:
     """The given faces of `mesh`, in that order, over only the vertices they use (each triangle
-    keeps its corners' coordinates and order, so FCL computes the same numbers on it)."""
+    keeps its corners' coordinates and order, so FCL computes the same numbers on it); only its
+    arrays are read (FCL's BVH), so no trimesh is made."""
     used, corners = np.unique(np.asarray(mesh.faces)[faces], return_inverse=True)
-    return trimesh.Trimesh(np.asarray(mesh.vertices)[used], corners.reshape(-1, 3), process=False)
+    return LazyMesh(np.asarray(mesh.vertices)[used], corners.reshape(-1, 3))
 
 
 def _relative(pose_i: np.ndarray, pose_j: np.ndarray) -> np.ndarray:

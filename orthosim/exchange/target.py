@@ -215,6 +215,9 @@ def register_target_mesh(local_mesh, start_pose: np.ndarray, target_mesh) -> tup
     """
     import trimesh
 
+    from orthosim.geometry.lazymesh import as_trimesh
+
+    target_mesh = as_trimesh(target_mesh)  # icp takes a mesh only as a trimesh (else as points)
     start_v = np.asarray(local_mesh.vertices, float) @ start_pose[:3, :3].T + start_pose[:3, 3]
     tv = np.asarray(target_mesh.vertices, float)
     guess = np.eye(4)

@@ -12,10 +12,13 @@ import hashlib
 import threading
 import weakref
 from collections import OrderedDict
+from typing import TYPE_CHECKING
 
 import fcl
 import numpy as np
-import trimesh
+
+if TYPE_CHECKING:  # FCL takes a mesh's two arrays: a run's first steps never import trimesh (orthosim.geometry.lazymesh)
+    import trimesh
 
 # BVHs kept per process, by mesh content, for the next object of the same mesh (least recently
 # used dropped beyond this many): a batch worker runs model after model, mostly the same teeth.
@@ -138,6 +141,7 @@ _FRESH: dict[int, tuple] = {}  # id(mesh) -> (weak reference to it, fresh copy)
 
 def _deepest_inside(mesh: trimesh.Trimesh, points: np.ndarray) -> float:
     """mm, the largest depth of `points` inside `mesh` (0 when none is inside)."""
+    import trimesh
     from scipy.spatial import cKDTree
 
     # A mesh that came through pickle (a child process's dentition) can carry a stale spatial

@@ -39,9 +39,9 @@ numbers bit for bit.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 from numba import njit
 
 from orthosim.geometry.signeddistance import (STACK, MeshSurface, closest_face, closest_on_triangles_numpy, compiled_pays,
@@ -49,6 +49,9 @@ from orthosim.geometry.signeddistance import (STACK, MeshSurface, closest_face, 
                                               signed_distance_scalar, signed_distances, signed_distances_numpy,
                                               squared_distances, surface_within)
 from orthosim.system.firstrun import announce_compiles
+
+if TYPE_CHECKING:  # a mesh's two arrays are all it reads: a run's child never imports trimesh for a depth
+    import trimesh
 
 DEPTH_TOLERANCE_MM = 0.01  # the surface depth is found to within this below the truth
 _BALL_STEPS = 24  # bisection steps of a ball's radius (root radius / 2**24: far below the tolerance)

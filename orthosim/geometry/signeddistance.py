@@ -36,14 +36,16 @@ import math
 import time
 import weakref
 from pathlib import Path
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
-import trimesh
 from numba import njit
 
 from orthosim.storage import numpytally
 from orthosim.system.firstrun import announce_compiles
+
+if TYPE_CHECKING:  # a mesh's two arrays are all it reads: a run's child never imports trimesh for a depth
+    import trimesh
 
 LEAF_FACES = 8  # faces in a leaf of the hierarchy
 # Nodes a depth-first descent of a hierarchy holds at once: one waiting sibling per level and the two

@@ -65,6 +65,8 @@ class Dentition:
         """
         freed = 0
         for tooth in self.teeth.values():
+            if not getattr(tooth.mesh, "built", True):  # a LazyMesh whose trimesh was never made has derived nothing
+                continue
             cache = tooth.mesh._cache  # trimesh keeps derived values here, keyed on the data's hash
             freed += sum(getattr(v, "nbytes", 0) for v in cache.cache.values())
             cache.clear()

@@ -30,12 +30,13 @@ from typing import Callable, Iterable, Mapping
 import numpy as np
 
 from orthosim.errors import DamagedFileError
+from orthosim.geometry.lazymesh import DERIVED, LazyMesh, derived_values, known_values
 from orthosim.storage.cacheentry import ENTRY_FORMAT, DamagedEntryWarning, damaged, read_arrays, warn_damaged, write_arrays
 from orthosim.storage.shipped import shipped_entry
 from orthosim.storage.sourcedigest import source_digest
 from orthosim.system.firstrun import preparing
 
-BUILDER_VERSION = 1
+BUILDER_VERSION = 2  # 2: entries keep the trimesh-derived values a run reads (orthosim.geometry.lazymesh)
 ENTRY_KIND = "dentition"
 # Modules whose code decides what a built dentition holds: their source is part of the key.
 _BUILDER_MODULES = ("model/anatomy", "model/archform", "model/dentition", "model/fdi", "collision/interpenetration",
@@ -101,6 +102,9 @@ def save_dentition(dent, path: str | Path, raised: list[tuple[str, str]] = ()) -
         arrays[f"{n}_rest_pose"] = np.asarray(t.rest_pose, np.float64)
         for name, p in t.landmarks.items():
             arrays[f"{n}_landmark_{name}"] = np.asarray(p, np.float64)
+        # areas and mass properties, so that a run's model build reads them instead of importing trimesh
+        for name, value in derived_values(arrays[f"{n}_vertices"], arrays[f"{n}_faces"]).items():
+            arrays[f"{n}_derived_{name}"] = value
         teeth.append({"fdi": n, "source": t.source, "landmarks": list(t.landmarks), "root": t.root_origin})
     for name, gum in dent.gingiva.items():
         arrays[f"gingiva_{name}_vertices"] = np.asarray(gum.vertices, np.float64)
@@ -136,9 +140,8 @@ def load_dentition(path: str | Path):
     """(dentition, warnings raised when it was built) from an entry written by `save_dentition`.
 
     Raises FileNotFoundError when absent, `DamagedFileError` when the entry fails its checksum,
-    header or content checks (shapes, finite numbers, face indices)."""
-    import trimesh
-
+    header or content checks (shapes, finite numbers, face indices). The teeth's meshes are
+    `LazyMesh`es: a run that reads only their arrays never imports trimesh."""
     from orthosim.model.dentition import Dentition
     from orthosim.model.tooth import Tooth
 
@@ -150,7 +153,7 @@ def load_dentition(path: str | Path):
         for entry in header["teeth"]:
             n = int(entry["fdi"])
             a = _tooth_arrays(path, z, entry)
-            mesh = trimesh.Trimesh(a["vertices"], a["faces"], process=False)
+            mesh = LazyMesh(a["vertices"], a["faces"], _derived(path, z, n, len(a["faces"])))
             teeth[n] = Tooth(fdi=n, mesh=mesh, face_part=a["face_part"], crown_center=a["crown_center"], apex=a["apex"],
                              rest_pose=a["rest_pose"], source=entry["source"],
                              landmarks={name: a[f"landmark_{name}"] for name in entry["landmarks"]},
@@ -160,6 +163,20 @@ def load_dentition(path: str | Path):
         return Dentition(teeth, header["description"], header["info"], gingiva), raised
     except (KeyError, TypeError, ValueError) as err:  # a header this version did not write
         raise damaged(path, f"its header does not describe a dentition ({type(err).__name__}: {err})") from None
+
+
+def _derived(path: Path, z: Mapping[str, np.ndarray], n: int, n_faces: int) -> dict:
+    """Tooth n's trimesh-derived values (`orthosim.geometry.lazymesh.DERIVED`), checked; {} when the
+    entry has none (its LazyMesh then makes its trimesh when they are asked for)."""
+    found = {name: z[f"{n}_derived_{name}"] for name in DERIVED if f"{n}_derived_{name}" in z}
+    if not found:
+        return {}
+    shapes = {"area_faces": (n_faces,), "center_mass": (3,), "moment_inertia": (3, 3)}
+    for name in DERIVED:
+        a = found.get(name)
+        if a is None or a.shape != shapes.get(name, ()):  # not checked finite: an open mesh's may not be, as trimesh's
+            raise damaged(path, f"tooth {n}: derived {name} is missing or has the wrong shape")
+    return known_values(found)
 
 
 def _root_origin(path: Path, value) -> str:

@@ -23,7 +23,6 @@ from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from orthosim.model import fdi as F
 from orthosim.model.anatomy import dimensions
@@ -32,7 +31,9 @@ from orthosim.model.dentition import Dentition
 from orthosim.model.occlusion import molar_relation, overjet
 from orthosim.model.tooth import CROWN, Tooth, part_of_faces
 
-if TYPE_CHECKING:  # imported where the model is built: a cached model needs neither FCL nor numba
+if TYPE_CHECKING:  # imported where the model is built: a cached model needs neither trimesh, FCL nor numba
+    import trimesh
+
     from orthosim.geometry.meshquery import MeshQuery
 
 CONTACT_GAP_MAX = 0.05  # mm: the largest gap accepted between teeth that should touch
@@ -70,6 +71,8 @@ def _blank(fdi: int, resolution) -> _Blank:
     if F.quadrant(fdi) in (1, 3):  # mirror image: local +x is distal here (see orthosim.model.tooth)
         v = mesh.vertices.copy()
         v[:, 0] *= -1
+        import trimesh  # here, not at the top: a run that loads the model from the cache never imports it
+
         mesh = trimesh.Trimesh(v, mesh.faces[:, ::-1].copy(), process=False)
         landmarks = {k: p * np.array([-1.0, 1.0, 1.0]) for k, p in landmarks.items()}
     crown = mesh.vertices[np.unique(mesh.faces[part_of_faces(mesh) == CROWN])]
@@ -299,6 +302,8 @@ def build_parametric_dentition(resolution: int | str = "smooth", third_molars: b
 def _crown_center(mesh: trimesh.Trimesh) -> np.ndarray:
     """Volume centroid of the part of the tooth coronal of the CEJ plane (local y >= 0)."""
     lo, hi = mesh.bounds
+    import trimesh
+
     box = trimesh.creation.box(bounds=[[lo[0] - 1, 0.0, lo[2] - 1], [hi[0] + 1, hi[1] + 1, hi[2] + 1]])
     crown = trimesh.boolean.intersection([mesh, box], engine="manifold")
     return np.asarray(crown.center_mass, float)

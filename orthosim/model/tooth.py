@@ -16,12 +16,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from orthosim.model import fdi as fdi_mod
 from orthosim.model.fdi import Arch, ToothType
+
+if TYPE_CHECKING:  # a tooth from the cache holds a LazyMesh (orthosim.geometry.lazymesh): no trimesh import to load it
+    import trimesh
 
 CROWN = 0  # face part code: enamel crown, coronal of the CEJ
 ROOT = 1  # face part code: root, apical of the CEJ
@@ -40,7 +43,7 @@ class Tooth:
     """
 
     fdi: int
-    mesh: trimesh.Trimesh  # closed, outward normals, local frame, mm
+    mesh: trimesh.Trimesh  # closed, outward normals, local frame, mm (or a LazyMesh of its arrays)
     face_part: np.ndarray  # (n_faces,) int8, CROWN or ROOT per face
     crown_center: np.ndarray  # (3,) mm, local: geometric centre of the crown part
     apex: np.ndarray  # (3,) mm, local: root apex level on the long axis

@@ -22,7 +22,6 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-import trimesh
 
 from orthosim.mechanics.biomechanics import build_mechanics
 from orthosim.model.tooth import Tooth
@@ -38,6 +37,8 @@ def stretched_root(tooth: Tooth, factor: float) -> Tooth:
     v = tooth.mesh.vertices.copy()
     below = v[:, 1] < 0.0
     v[below, 1] *= factor
+    import trimesh  # here: a run's report imports this module, and its first step needs no trimesh
+
     mesh = trimesh.Trimesh(v, tooth.mesh.faces, process=False)
     return replace(tooth, mesh=mesh, apex=np.asarray(tooth.apex, float) * np.array([1.0, factor, 1.0]),
                    landmarks=dict(tooth.landmarks))

@@ -22,6 +22,7 @@ the teeth it draws, so nothing is built twice. Phases 2 and 3 are reported by th
 
 from __future__ import annotations
 
+import itertools
 import math
 import sys
 import time
@@ -165,6 +166,13 @@ class _Split:
                     self.on_record(item)
                 yield item
 
+    def first_read(self) -> Iterator:
+        """These records, the first read now: the drawing imports its renderer (about a second)
+        while the simulation computes the next steps, rather than before it takes the first."""
+        items = iter(self)
+        first = next(items, None)
+        return items if first is None else itertools.chain((first,), items)
+
 
 # ------------------------------------------------------------------------------------------ the run
 
@@ -244,7 +252,7 @@ def _simulate_and_draw(case, options: RunOptions, out_dir: Path, draw: Callable,
         strategy = choose_strategy(options.simulate_in_process or options.render.single_core)
         source = strategy.start(case, options.detector, out_dir, log, stack)
         split = _Split(source.records, log, keep)
-        rendered = draw(source.dentition, split, out_dir, options, extracted=frozenset(case.extractions),
+        rendered = draw(source.dentition, split.first_read(), out_dir, options, extracted=frozenset(case.extractions),
                         per_step=per_step, total=n_frames, progress=log.bars_shown, case=case)
         log.phase("simulate", time.perf_counter() - split.simulation_started - rendered.get("encode_s", 0.0),
                   f"{split.steps} steps, {rendered.get('frames', 0)} frames drawn (simulation {source.where})")

@@ -19,9 +19,10 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from typing import Iterator, Protocol
 
-# what both sides of a drawn run use (the teeth: numpy, scipy, trimesh and FCL, which trimesh loads),
-# imported before the fork so that the two processes share it; the step's own (the collision
-# package, numba) only the simulation child imports, and the renderer only this process
+# what both sides of a drawn run use (the teeth: numpy and orthosim's own modules; the teeth are
+# LazyMeshes, so no trimesh), imported before the fork so that the two processes share it; the step's
+# own (the collision package, FCL, scipy's k-d tree, numba) only the simulation child imports, and the
+# renderer only this process, once the first step has reached it
 SHARED_MODULES = ("orthosim.runtime.run", "orthosim.runtime.stream", "orthosim.model.dentition", "orthosim.analysis.metrics", "orthosim.movement.records")
 SIMULATION_MODULES = ("orthosim.runtime.stream", "orthosim.collision.detect", "orthosim.collision.queries",
                       "orthosim.movement.simulation")
@@ -93,7 +94,7 @@ class ForkedChild:
         # fork in the child only, the renderer (and its OpenGL context) in this process only
         t = time.perf_counter()
         _import_modules(SHARED_MODULES)
-        log.phase("imports", time.perf_counter() - t, "numpy, scipy, trimesh, FCL: once, for both processes")
+        log.phase("imports", time.perf_counter() - t, "numpy and the run's modules: once, for both processes")
         t = time.perf_counter()
         cached = case.dentition_is_cached()
         dent = case.build_dentition()

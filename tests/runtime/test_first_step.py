@@ -1,7 +1,11 @@
-"""What a drawn run's simulation child does before its first step (issue 42, start-up under a
-second): with the caches warm, it loads the teeth and their sphere trees and takes the first step
-without importing numba (its import and typing set-up), the sphere-tree builder or anything of the
-drawing (pyrender, OpenGL), so the first step waits for none of them."""
+"""What a drawn run's two processes import before its first step (issue 42, start-up in 0.8 s):
+with the caches warm, the simulation child loads the teeth (as arrays: `LazyMesh`) and their sphere
+trees and takes the first step without importing trimesh (nor networkx, which it pulls), numba (its
+import and typing set-up), the sphere-tree builder or anything of the drawing (pyrender, OpenGL);
+the drawing process receives that step having imported none of trimesh, scipy, numba, FCL,
+pyrender or OpenGL (it loads its renderer while the next steps are computed), so the first step
+waits for none of them. The child's first step still imports FCL (its exact distances) and
+scipy.spatial (the k-d tree that cuts each touching pair's patches)."""
 
 from __future__ import annotations
 
@@ -20,7 +24,9 @@ from orthosim.runtime.strategies import SHARED_MODULES
 ROOT = Path(__file__).resolve().parents[2]
 CASE = ROOT / "cases" / "case1_first_premolar_extraction.toml"
 NOT_BEFORE_THE_FIRST_STEP = ("numba", "orthosim.spheretree.fit", "orthosim.spheretree.outside_band", "pyrender",
-                             "OpenGL")
+                             "OpenGL", "trimesh", "networkx", "tqdm")
+# what the drawing process has not imported when the first step record reaches it
+NOT_BEFORE_THE_FIRST_RECORD = ("trimesh", "scipy", "numba", "fcl", "pyrender", "OpenGL", "networkx")
 
 # the child's side of `orthosim run`: what the drawing process imports before it forks, then the
 # simulation stream (orthosim.runtime.stream) up to its first step record
@@ -53,3 +59,36 @@ def test_with_warm_caches_the_first_step_imports_neither_numba_nor_the_tree_buil
     seen = json.loads(done.stdout)
     assert seen["kinds"] == ["PhaseDone", "PhaseDone", "StepRecord"]  # model, trees, then the first step
     assert seen["imported"] == []
+
+
+# `orthosim run` as the console script runs it; when its --verbose line says the first step record
+# has reached this (the drawing) process, it notes which of the heavy modules this process holds
+_DRAWING = """
+import json, sys
+import orthosim.runtime.run as run
+note = run.RunLog.note
+def noting(self, text):
+    if text.startswith("first step after"):
+        print("imported at the first step: " + json.dumps(sorted(m for m in {heavy!r} if m in sys.modules)), file=sys.stderr)
+    note(self, text)
+run.RunLog.note = noting
+sys.argv = ["orthosim"] + sys.argv[1:]
+from orthosim.cli import entry
+entry()
+"""
+
+
+@pytest.mark.slow  # a drawn run of two steps in fresh processes
+def test_with_warm_caches_the_drawing_process_receives_the_first_step_before_importing_trimesh_scipy_fcl_or_the_renderer(tmp_path):
+    case = tmp_path / "case.toml"  # case 1, two steps
+    case.write_text(CASE.read_text().replace("duration_days = 600", "duration_days = 60"))
+    CollisionModel.from_dentition(load_case(case).build_dentition())  # warm caches, as after a first run
+    env = {**os.environ, "PYOPENGL_PLATFORM": "osmesa"}
+    done = subprocess.run([sys.executable, "-c", _DRAWING.format(heavy=NOT_BEFORE_THE_FIRST_RECORD), "run", str(case),
+                           "--out", str(tmp_path / "out"), "--verbose", "--size", "64x48", "--frames-per-step", "1"],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    noted = [line for line in done.stderr.splitlines() if line.startswith("imported at the first step: ")]
+    assert len(noted) == 1, done.stderr  # the first step reached the drawing process, once
+    assert json.loads(noted[0].split(": ", 1)[1]) == []
+    assert (tmp_path / "out" / "metrics.json").is_file()  # and the run went on to draw and finish
