@@ -8,5 +8,7 @@ points on a hierarchy of its faces, the pseudonormals' sign), which the distance
 closure and `penetration` ask (numba; imported on demand). `penetration`: the interpenetration depth
 on every point of the triangles and by the largest ball inside both meshes, and the cheaper one on
 vertices and edges a simulation step asks (numba; imported on demand). `meshcut` (a mesh cut by a
-plane), `meshrefine` (a coarse mesh subdivided where detail is needed).
+plane), `meshrefine` (a coarse mesh subdivided where detail is needed), `lazymesh` (a mesh held as
+its two arrays, its trimesh made on first use: what the dentition cache hands out, so that a run's
+first step never imports trimesh).
 """
