@@ -44,8 +44,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from orthosim.geometry.signeddistance import (STACK, MeshSurface, closest_face, closest_on_triangles_numpy, compiled_pays,
-                                              distance_to_face, distance_to_face_scalar, mesh_surface, node_gaps_numpy,
+from orthosim.geometry.signeddistance import (STACK, MeshSurface, closest_face, closest_on_triangles_numpy,
+                                              compiled_pays_for, distance_to_face, distance_to_face_scalar,
+                                              mesh_surface, node_gaps_numpy,
                                               signed_distance_scalar, signed_distances, signed_distances_numpy,
                                               squared_distances, surface_within)
 from orthosim.system.firstrun import announce_compiles
@@ -421,7 +422,7 @@ def penetration_depth(mesh_a: trimesh.Trimesh, pose_a: np.ndarray, mesh_b: trime
     point inside the other solid. Poses: (4, 4) local -> common frame. Meshes must be closed and
     consistently oriented (outward normals), as the teeth are."""
     tol = float(tolerance_mm)
-    compiled = compiled_pays(*_EDGE_KERNELS, _ball_depth, _surface_depth)
+    compiled = compiled_pays_for(max(len(mesh_a.faces), len(mesh_b.faces)), *_EDGE_KERNELS, _ball_depth, _surface_depth)
     ways = _facing(mesh_a, pose_a, mesh_b, pose_b, tol, compiled)
     best = _vertex_depth(ways)
     ball_depth = _ball_depth if compiled else _ball_depth_numpy
@@ -445,7 +446,7 @@ def edge_penetration_depth(mesh_a: trimesh.Trimesh, pose_a: np.ndarray, mesh_b: 
     inside, read their real depth (crossed ridges sunk d: d / sqrt(2)). Left to `penetration_depth`:
     a deepest point inside a face of both meshes, and coincident surfaces (the ball)."""
     tol = float(tolerance_mm)
-    compiled = compiled_pays(*_EDGE_KERNELS)
+    compiled = compiled_pays_for(max(len(mesh_a.faces), len(mesh_b.faces)), *_EDGE_KERNELS)
     ways = _facing(mesh_a, pose_a, mesh_b, pose_b, tol, compiled)
     best = _vertex_depth(ways)
     for own, other, _, moved, faces, verts, depths in ways:

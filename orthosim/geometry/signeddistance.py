@@ -96,7 +96,7 @@ class MeshSurface:
         tri = V[F]
         centroids = tri.mean(axis=1)
         radii = np.linalg.norm(tri - centroids[:, None, :], axis=2).max(axis=1) * (1 + 1e-12) + 1e-12
-        build = build_hierarchy if compiled_pays(build_hierarchy) else build_hierarchy_numpy  # the same arrays
+        build = build_hierarchy if compiled_pays_for(len(F), build_hierarchy) else build_hierarchy_numpy  # same arrays
         tree = build(centroids, radii, tri.min(axis=1), tri.max(axis=1), LEAF_FACES)
         self.arrays = SurfaceArrays(V, F, np.ascontiguousarray(tri[tree[-1]]), face_n, face_edges, edge_n, vert_n, *tree)
         lo, hi = V.min(axis=0), V.max(axis=0)
@@ -123,7 +123,8 @@ class MeshSurface:
         negative inside, +inf where no point of the surface lies within `cap_mm`; (n,) the face
         holding the closest point, -1 beyond the cap). A cap keeps far points cheap."""
         pts = np.ascontiguousarray(np.asarray(points, float).reshape(-1, 3))
-        query = signed_distances if compiled_pays(signed_distances) else signed_distances_numpy  # the same numbers
+        compiled = compiled_pays_for(len(self.arrays.faces), signed_distances)
+        query = signed_distances if compiled else signed_distances_numpy  # the same numbers
         return query(pts, self.arrays, float(cap_mm))
 
     def moved(self, M: np.ndarray) -> SurfaceArrays:
@@ -460,6 +461,20 @@ def compiled_pays(*kernels) -> bool:
     if _preferred or in_numba_cache(*kernels):
         return True
     return _numpy_seconds[0] + numpytally.carried(TALLY, *_KERNEL_SOURCES) > PAYS_AFTER_S
+
+
+# Faces a mesh may have for its queries to run in numpy before compiling pays. The numpy forms search
+# every leaf of the hierarchy for each point and replay branch and bound point by point, so their
+# cost grows with the mesh: on real teeth (about 40,000 faces) a real jaw's rest interpenetration
+# took 213 s in numpy against 25 s compiled, cold (2026-11-29, quiet two-core machine). Above this
+# many faces in a mesh a query compiles at once (once per machine); the parametric teeth (4,500 to
+# 7,000 faces, the demo's) stay on numpy until it pays.
+NUMPY_AT_MOST_FACES = 10_000
+
+
+def compiled_pays_for(faces: int, *kernels) -> bool:
+    """`compiled_pays`, or at once for a mesh of more than NUMPY_AT_MOST_FACES `faces`."""
+    return faces > NUMPY_AT_MOST_FACES or compiled_pays(*kernels)
 
 
 def _spent_numpy(started: float) -> None:

@@ -79,7 +79,7 @@ def test_interpenetration_depths_in_numpy_are_the_compiled_ones(paper_teeth, mon
     cases = [(a, b, *_pushed_together(rng, teeth, a, b)) for a, b in pairs for _ in range(2)]
 
     def depths(measure, compiled: bool, chosen):
-        monkeypatch.setattr(penetration, "compiled_pays", lambda *kernels: compiled)
+        monkeypatch.setattr(penetration, "compiled_pays_for", lambda faces, *kernels: compiled)
         return [measure(teeth[a].mesh, pa, teeth[b].mesh, pb) for a, b, pa, pb in chosen]
 
     edge = depths(penetration.edge_penetration_depth, True, cases)
@@ -102,3 +102,25 @@ def test_a_process_answers_in_numpy_until_compiling_pays(monkeypatch):
     monkeypatch.setattr(signeddistance, "_numpy_seconds", [0.0])
     signeddistance.prefer_compiled()
     assert signeddistance.compiled_pays(signed_distances)
+
+
+def test_a_large_mesh_compiles_at_once_and_the_demos_teeth_wait_until_it_pays(paper_teeth, monkeypatch):
+    """The numpy forms' cost grows with the mesh (every leaf searched per point): a real tooth of about
+    40,000 faces compiles at once (a real jaw's rest interpenetration: 213 s in numpy against 25 s
+    compiled), while the parametric teeth the demo runs on stay on numpy until it pays."""
+    monkeypatch.setattr(signeddistance, "_preferred", [])
+    monkeypatch.setattr(signeddistance, "_numpy_seconds", [0.0])
+    monkeypatch.setattr("orthosim.system.firstrun.in_numba_cache", lambda *kernels: False)
+    monkeypatch.setattr("orthosim.storage.numpytally.carried", lambda *counter: 0.0)
+    largest = max(len(t.mesh.faces) for t in paper_teeth.teeth.values())
+    assert largest <= signeddistance.NUMPY_AT_MOST_FACES
+    assert not signeddistance.compiled_pays_for(largest, signed_distances)
+    assert signeddistance.compiled_pays_for(40_000, signed_distances)
+    chosen = []
+    monkeypatch.setattr(penetration, "_facing", lambda *args: chosen.append(args[-1]) or [])
+    big = trimesh.creation.icosphere(subdivisions=6, radius=5.0)  # 81,920 faces
+    small = trimesh.creation.icosphere(subdivisions=3, radius=5.0)  # 1,280 faces
+    for measure in (penetration.penetration_depth, penetration.edge_penetration_depth):
+        measure(small, np.eye(4), small, np.eye(4))
+        measure(small, np.eye(4), big, np.eye(4))
+    assert chosen == [False, True, False, True]  # compiled (True) only where a mesh is large
