@@ -12,6 +12,12 @@ grouped by name: Python threads by `threading` name less a trailing number ("png
 others by their kernel name ("llvmpipe-1" -> "llvmpipe"); child processes by their command name
 ("python": the simulation child, "ffmpeg": the MP4 encoder), all their threads together.
 Elsewhere than Linux, `cpu_snapshot` returns None and the figures are left out.
+
+A child that ends between the two snapshots (the simulation child sends its last step and exits
+while the last frames are drawn) is no longer in /proc at the second one; its CPU is still
+counted: the snapshot also holds what the process's waited-for children used in all
+(`os.times()`), and what that grew by, less what the ended children had used at the first
+snapshot, is theirs, under their group's name.
 """
 
 from __future__ import annotations
@@ -67,8 +73,13 @@ def cpu_snapshot() -> dict[str, float] | None:
     for pid in family - {me}:
         comm, cpu, _ = procs[pid]
         name = "simulation child" if comm.startswith("python") else _group(comm.split("-")[0])
-        out[f"{name}:{pid}"] = cpu
+        out[f"{name}:p{pid}"] = cpu  # "p": a process (a thread's key ends in its bare id)
+    t = os.times()
+    out[_REAPED] = t.children_user + t.children_system  # children waited for: gone from /proc
     return out
+
+
+_REAPED = "reaped children:"  # a snapshot's key for the CPU of the children that ended and were waited for
 
 
 def cpu_ms_per_frame(before: dict[str, float] | None, after: dict[str, float] | None, frames: int) -> dict[str, float] | None:
@@ -78,8 +89,17 @@ def cpu_ms_per_frame(before: dict[str, float] | None, after: dict[str, float] | 
     groups: dict[str, float] = {}
     for key, cpu in after.items():
         spent = cpu - before.get(key, 0.0)
-        if spent > 0:
+        if spent > 0 and key != _REAPED:
             name = key.rsplit(":", 1)[0]
+            groups[name] = groups.get(name, 0.0) + spent
+    ended = [key for key in before  # child processes gone since the first snapshot
+             if key not in after and key != _REAPED and key.rsplit(":", 1)[1].startswith("p")]
+    if _REAPED in before and _REAPED in after:
+        # the ended children's last CPU came into os.times() when they were waited for
+        spent = (after[_REAPED] - before[_REAPED]) - sum(before[key] for key in ended)
+        names = {key.rsplit(":", 1)[0] for key in ended}
+        if spent > 0:
+            name = names.pop() if len(names) == 1 else "ended children"
             groups[name] = groups.get(name, 0.0) + spent
     out = {k: 1000.0 * v / frames for k, v in sorted(groups.items(), key=lambda kv: -kv[1])}
     out["total"] = sum(out.values())

@@ -46,5 +46,23 @@ def test_cpu_is_counted_per_named_thread_and_per_child_process():
     assert per_frame["total"] == pytest.approx(sum(v for k, v in per_frame.items() if k != "total"))
 
 
+def test_a_child_that_ends_between_the_snapshots_is_still_counted():
+    """The simulation child sends its last step and exits while the drawing finishes: its CPU in
+    the window counts once it has been waited for, under its own name."""
+    spin = ("import sys, time\nprint('ready', flush=True)\nsys.stdin.readline()\nt = time.process_time()\n"
+            "while time.process_time() - t < 0.4: pass\n")
+    child = subprocess.Popen([sys.executable, "-c", spin], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                             text=True)
+    assert child.stdout.readline().strip() == "ready"
+    before = cpu_snapshot()
+    child.stdin.write("go\n")
+    child.stdin.flush()
+    child.wait(30)  # ended and waited for: gone from /proc
+    after = cpu_snapshot()
+    per_frame = cpu_ms_per_frame(before, after, frames=10)
+    assert per_frame["simulation child"] == pytest.approx(40.0, abs=8.0)  # 400 ms over 10 frames
+    assert per_frame["total"] == pytest.approx(sum(v for k, v in per_frame.items() if k != "total"))
+
+
 def test_no_snapshot_means_no_figures():
     assert cpu_ms_per_frame(None, cpu_snapshot(), 10) is None
