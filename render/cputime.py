@@ -10,7 +10,7 @@ simulation child share the machine's cores; the CPU each takes per frame says wh
 and their sum against the cores says what frame rate the machine can reach at all. Threads are
 grouped by name: Python threads by `threading` name less a trailing number ("png-0" -> "png"),
 others by their kernel name ("llvmpipe-1" -> "llvmpipe"); child processes by their command name
-("python": the simulation child, "ffmpeg": the MP4 encoder), all their threads together.
+("python", or "orthosim" when forked from the command: the simulation child; "ffmpeg": the MP4 encoder), all their threads together.
 Elsewhere than Linux, `cpu_snapshot` returns None and the figures are left out.
 
 A child that ends between the two snapshots (the simulation child sends its last step and exits
@@ -72,7 +72,7 @@ def cpu_snapshot() -> dict[str, float] | None:
                 grew = True
     for pid in family - {me}:
         comm, cpu, _ = procs[pid]
-        name = "simulation child" if comm.startswith("python") else _group(comm.split("-")[0])
+        name = "simulation child" if comm.startswith(("python", "orthosim")) else _group(comm.split("-")[0])
         out[f"{name}:p{pid}"] = cpu  # "p": a process (a thread's key ends in its bare id)
     t = os.times()
     out[_REAPED] = t.children_user + t.children_system  # children waited for: gone from /proc
