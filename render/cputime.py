@@ -10,7 +10,8 @@ simulation child share the machine's cores; the CPU each takes per frame says wh
 and their sum against the cores says what frame rate the machine can reach at all. Threads are
 grouped by name: Python threads by `threading` name less a trailing number ("png-0" -> "png"),
 others by their kernel name ("llvmpipe-1" -> "llvmpipe"); child processes by their command name
-("python", or "orthosim" when forked from the command: the simulation child; "ffmpeg": the MP4 encoder), all their threads together.
+("python", or "orthosim" when forked from the command: the simulation child; "ffmpeg": the MP4
+encoder), all their threads together.
 Elsewhere than Linux, `cpu_snapshot` returns None and the figures are left out.
 
 A child that ends between the two snapshots (the simulation child sends its last step and exits
