@@ -440,8 +440,8 @@ def surface_within(p, rho, s):
 # steps spend a few seconds in numpy and never compile; a long run compiles once, for every later
 # run too. Wall seconds (reading a thread's CPU clock costs more here than a query), so a loaded
 # machine compiles sooner.
-# The seconds count across runs too (`orthosim.storage.numpytally`): about the twentieth demo
-# compiles, not never.
+# The seconds count across runs too (`orthosim.storage.numpytally`): about the third to eighth
+# demo compiles, not none.
 PAYS_AFTER_S = 30.0
 _numpy_seconds = [0.0]
 TALLY = "signed-distance-numpy-s"  # the counter of numpy seconds in the tally of earlier runs

@@ -1,13 +1,14 @@
 """The numpy tally: what earlier runs spent on numpy forms of the compiled kernels, kept in the cache folder.
 
-A run answers its depth and signed-distance queries and its detectors' descents in numpy until
-compiling numba's kernels pays (`orthosim.geometry.signeddistance.compiled_pays`,
-`orthosim.collision.descent.compiled_descent`), so that a short run never waits for the compiler.
-Counted in one process only, a user who makes nothing but short runs would never compile, and
-every run would pay numpy's price again (the demo: about 1.4 s of its 14.6 s on the quiet two-core
-machine, 2026-11-28). So each process adds what it spent to this tally, and a run compiles once
-what earlier runs spent and what it spends itself pass the threshold together: about the twentieth
-demo compiles, once, for every later run.
+A run answers its depth and signed-distance queries in numpy until compiling numba's kernels pays
+(`orthosim.geometry.signeddistance.compiled_pays`), so that a short run never waits for the
+compiler. Counted in one process only, a user who makes nothing but short runs would never
+compile, and every run would pay numpy's price again (the demo: 16.4 s warm against 13.9 s with
+the kernels compiled, the quiet two-core machine, 2026-11-29). So each process adds the seconds it
+spent to this tally, and a run compiles once what earlier runs spent and what it spends itself
+pass the threshold together: the demo spends 4-12 s there, so about its third to eighth run
+compiles, once, for every later run. (The detectors' descent keeps its own per-process rule:
+loading its kernels costs more than a short run's numpy descents.)
 
 The tally belongs to one compile: its key is the kernels' source files with their modification
 times (the stamp numba's own cache checks) and numba's cache folder (`NUMBA_CACHE_DIR`, or beside
