@@ -74,3 +74,38 @@ def test_a_json_entry_with_one_figure_changed_is_damaged_and_a_missing_one_is_ab
         E.read_json(path, "treefit", "fit")
     with pytest.raises(FileNotFoundError):
         E.read_json(tmp_path / "absent.json", "treefit", "absent")
+
+
+def _every_kind_of_member():
+    rng = np.random.default_rng(5)
+    return {"f8": rng.normal(size=(7, 3)), "f4": rng.normal(size=5).astype(np.float32), "i8": np.arange(6, dtype=np.int64),
+            "u1": np.arange(4, dtype=np.uint8), "b1": np.array([True, False, True]), "big": np.arange(3, dtype=">i4"),
+            "scalar": np.array(2.5), "empty": np.zeros((0, 3)), "text": np.array("é, and a long text " * 20),
+            "fortran": np.asfortranarray(rng.normal(size=(3, 4))), "wide": np.zeros((2, 3, 4, 5), np.int16)}
+
+
+def test_members_read_as_numpy_reads_them(tmp_path):
+    """The entry reader parses the members `np.save` writes itself (numpy's header parsing was most
+    of a warm start's cache reads); every member comes back as `np.load` gives it: dtype, shape,
+    bytes, writable. A Fortran-ordered member takes numpy's own reader."""
+    path = tmp_path / "k1.npz"
+    E.write_arrays(path, "dentition", "k1", _every_kind_of_member())
+    back = E.read_arrays(path, "dentition", "k1")
+    with np.load(path, allow_pickle=False) as z:
+        for name in _every_kind_of_member():
+            want = z[name]
+            assert back[name].dtype == want.dtype and back[name].shape == want.shape, name
+            assert back[name].tobytes(order="A") == want.tobytes(order="A") and np.array_equal(back[name], want), name
+            assert back[name].flags.writeable, name
+    assert back["fortran"].flags.f_contiguous
+
+
+def test_a_member_whose_bytes_changed_fails_the_zips_crc(tmp_path):
+    path = tmp_path / "k1.npz"
+    E.write_arrays(path, "dentition", "k1", _arrays())
+    data = bytearray(path.read_bytes())
+    at = data.find(np.arange(12, dtype=np.float64).tobytes())
+    data[at + 3] ^= 0x10  # a flipped bit in the vertices: zip's CRC-32 fails before the entry's checksum
+    path.write_bytes(bytes(data))
+    with pytest.raises(DamagedFileError, match="unreadable"):
+        E.read_arrays(path, "dentition", "k1")
