@@ -7,7 +7,8 @@ Modules: `contract` (request and result types), `detectors` (each detector as an
 capabilities), `model` (what never changes), `broadphase` (which pairs to test), `circles`
 (detector 1), `discrete` (detector 2), `continuous` (detector 3), `descent` (the shared vectorised
 tree descent) and `descent_compiled` (its numba form), `time_of_contact` (Eq. 2 and step bounds),
-`queries` (a run's exact answers on the meshes, through `orthosim.geometry.meshquery`), `detect`
+`queries` (a run's exact answers on the meshes, through `orthosim.geometry.meshquery`), `patchcache`
+(the first step's patches kept between runs), `detect`
 (the entry points: `detect_step`, `contacts`), `contact_area` (the exact contact faces inside
 overlapping leaves) and `trianglepairs` (its compiled test of triangle pairs within a distance), `interpenetration` (what a model's teeth overlap at rest), `validate`
 (accuracy studies). How a tooth moves within a step (the motion every detector assumes) is

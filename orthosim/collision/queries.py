@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Iterable, Mapping
 
 import numpy as np
 
+from orthosim.collision import patchcache
 from orthosim.geometry import meshquery
 from orthosim.geometry.lazymesh import LazyMesh
 from orthosim.collision.model import CollisionModel
@@ -141,6 +142,10 @@ class ExactQueries:
         self._patches: dict[tuple[int, int], _Patch] = {}
         self._faces: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._trees: dict[int, object] = {}
+        self._digests: dict[int, str] = {}
+        # where cuts are read from and kept (`orthosim.collision.patchcache`); None: each is cut here.
+        # A run keeps its first step's (`orthosim.runtime.stream`).
+        self.patch_cache: patchcache.PatchCache | None = None
         self._world: OrderedDict[bytes, np.ndarray] = OrderedDict()
 
     @property
@@ -285,6 +290,28 @@ class ExactQueries:
         centroid) of the centroid, so a face within the reach of a face of the other mesh has its
         centroid within reach + its own corner radius + the other mesh's largest corner radius of
         that face's centroid: every face whose centroid is that close to one of the other's is kept."""
+        faces = self._kept_faces(i, j, M, N)
+        if not len(faces[0]) or not len(faces[1]):
+            return _Patch(M, N, *faces)
+        objects = [meshquery.fcl_object(_submesh(self.model.bodies[k].mesh, f), memo=False) for k, f in ((i, faces[0]), (j, faces[1]))]
+        return _Patch(M, N, *faces, *objects)
+
+    def _kept_faces(self, i: int, j: int, M: np.ndarray, N: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The faces `_cut_patch` keeps, read from the patch cache when it holds this cut (and kept
+        there when it does not), else cut here."""
+        store = self.patch_cache
+        if store is None:
+            return self._faces_within_reach(i, j, M, N)
+        key = store.key(self._mesh_digest(i), self._mesh_digest(j), M, N, self.patch_reach_mm)
+        faces = store.get(key, *(len(self.model.bodies[k].mesh.faces) for k in (i, j)))
+        if faces is None:
+            faces = self._faces_within_reach(i, j, M, N)
+            store.put(key, *faces)
+        return faces
+
+    def _faces_within_reach(self, i: int, j: int, M: np.ndarray, N: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The cut itself (`_cut_patch`): each side's faces whose centroid lies within reach of a
+        centroid of the other's, through a k-d tree of the other's centroids."""
         faces = []
         for a, b, R in ((i, j, M), (j, i, N)):
             centroids, radii = self._face_spheres(a)
@@ -292,10 +319,14 @@ class ExactQueries:
             gap = self._centroid_tree(b).query(centroids @ R[:, :3].T + R[:, 3], distance_upper_bound=float(reach.max()))[0]
             kept = np.flatnonzero(gap <= reach)
             faces.append(kept[np.argsort(gap[kept], kind="stable")])  # nearest first: FCL's distance starts from faces 0
-        if not len(faces[0]) or not len(faces[1]):
-            return _Patch(M, N, *faces)
-        objects = [meshquery.fcl_object(_submesh(self.model.bodies[k].mesh, f), memo=False) for k, f in ((i, faces[0]), (j, faces[1]))]
-        return _Patch(M, N, *faces, *objects)
+        return faces[0], faces[1]
+
+    def _mesh_digest(self, i: int) -> str:
+        known = self._digests.get(i)
+        if known is None:
+            mesh = self.model.bodies[i].mesh
+            known = self._digests[i] = patchcache.mesh_digest(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+        return known
 
     def _face_spheres(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         """Body i's face centroids (f, 3) and corner radii (f,), mm, local frame."""

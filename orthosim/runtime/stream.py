@@ -41,6 +41,7 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, 
     from orthosim.runtime.background import release_freed_heap
     from orthosim.storage.numpytally import keep as keep_numpy_tally
     from orthosim.collision import CollisionModel, ExactQueries
+    from orthosim.collision.patchcache import PatchCache
     from orthosim.analysis.metrics import occlusion_summary
     from orthosim.movement.report import DISTANCES_PER_STEP_FILE, STEPS_FILE, RunReport
     from orthosim.movement.simulation import MovementModel, simulate
@@ -53,6 +54,9 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, 
     # a tooth's whole-mesh BVH is built when a step first needs it (most steps ask patches only:
     # case 1 needs 8 of its 24 teeth's), not for every tooth up front: ~55 MB less in a drawn run
     queries = ExactQueries(collision)
+    # every run of these teeth starts from the same poses, whatever its plan: the first step's
+    # patches are kept between runs (`orthosim.collision.patchcache`); later steps' are not
+    queries.patch_cache = PatchCache()
     t2 = time.perf_counter()
     model = MovementModel.build(case, dent, collision=collision)
     if not shared:
@@ -65,6 +69,7 @@ def simulation_stream(case, detector: str, out_dir: str | Path, dentition=None, 
     out_dir = Path(out_dir)
     report = RunReport(model, detector, steps_file=out_dir / STEPS_FILE, distances_file=out_dir / DISTANCES_PER_STEP_FILE)
     for record in report.collect(simulate(model, detector, queries=queries)):
+        queries.patch_cache = None
         yield record
     report.finish_streams(out_dir)
     keep_numpy_tally()  # what it spent in numpy, for later runs (a forked child ends with os._exit: no atexit)

@@ -4,8 +4,9 @@ trees and takes the first step without importing trimesh (nor networkx, which it
 import and typing set-up), the sphere-tree builder or anything of the drawing (pyrender, OpenGL);
 the drawing process receives that step having imported none of trimesh, scipy, numba, FCL,
 pyrender or OpenGL (it loads its renderer while the next steps are computed), so the first step
-waits for none of them. The child's first step still imports FCL (its exact distances) and
-scipy.spatial (the k-d tree that cuts each touching pair's patches)."""
+waits for none of them. The child's first step still imports FCL (its exact distances); the k-d
+tree that cuts each touching pair's patches (scipy.spatial) only in a run whose first step's
+patches no earlier run of these teeth kept (`orthosim.collision.patchcache`)."""
 
 from __future__ import annotations
 
@@ -42,7 +43,8 @@ for item in simulation_stream(load_case({case!r}), {detector!r}, {out!r}):
     kinds.append(type(item).__name__)
     if isinstance(item, StepRecord):
         break
-print(json.dumps({{"kinds": kinds, "imported": sorted(m for m in {heavy!r} if m in sys.modules)}}))
+print(json.dumps({{"kinds": kinds, "imported": sorted(m for m in {heavy!r} if m in sys.modules),
+                  "distances": repr(item.distances), "touching": repr(item.touching)}}))
 """
 
 
@@ -59,6 +61,24 @@ def test_with_warm_caches_the_first_step_imports_neither_numba_nor_the_tree_buil
     seen = json.loads(done.stdout)
     assert seen["kinds"] == ["PhaseDone", "PhaseDone", "StepRecord"]  # model, trees, then the first step
     assert seen["imported"] == []
+
+
+@pytest.mark.slow  # two fresh interpreters each taking the first step
+def test_the_first_steps_patches_are_kept_and_the_next_run_takes_the_same_first_step_without_scipy(tmp_path):
+    """Case 1's teeth and trees come from the shipped entries; the patches from an empty cache."""
+    env = {**os.environ, "ORTHOSIM_CACHE": str(tmp_path / "cache")}
+    code = _CHILD.format(shared=SHARED_MODULES, case=str(CASE), detector="continuous", out=str(tmp_path),
+                         heavy=("scipy.spatial",))
+    runs = []
+    for _ in range(2):
+        done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr
+        assert "Warning" not in done.stderr, done.stderr
+        runs.append(json.loads(done.stdout))
+    kept = list((tmp_path / "cache" / "patches").glob("*.npz"))
+    assert runs[0]["imported"] == ["scipy.spatial"] and len(kept) >= 10  # case 1's touching and adjacent pairs
+    assert runs[1]["imported"] == []
+    assert runs[1]["distances"] == runs[0]["distances"] and runs[1]["touching"] == runs[0]["touching"]  # repr: every bit
 
 
 # `orthosim run` as the console script runs it; when its --verbose line says the first step record
