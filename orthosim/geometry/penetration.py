@@ -308,17 +308,18 @@ def _reaching_faces_numpy(own, other, floor):
 
 def _edge_depth_numpy(segments, ends, best, tol, s):
     """`_edge_depth` in numpy, the same number: its branch and bound replayed segment by segment in
-    the same order (each bound depends on the best depth found so far), one depth query a split."""
+    the same order (each bound depends on the best depth found so far), one depth query a split. In
+    Python floats: the kernel's array operations are per element, so the same on each coordinate."""
     best = float(best)
-    for t in range(segments.shape[0]):
-        stack = [(segments[t, 0], segments[t, 1], float(ends[t, 0]), float(ends[t, 1]))]
+    for (a, b), (da, db) in zip(segments.tolist(), ends.tolist()):
+        stack = [(a, b, da, db)]
         while stack:
             a, b, da, db = stack.pop()
-            dx, dy, dz = float(b[0] - a[0]), float(b[1] - a[1]), float(b[2] - a[2])
+            dx, dy, dz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
             length = math.sqrt(dx * dx + dy * dy + dz * dz)
             if 0.5 * (da + db + length) <= best + tol:
                 continue
-            g = 0.5 * (a + b)
+            g = (0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.5 * (a[2] + b[2]))
             d, face = _depth_face_scalar(g, s)
             if d > best:
                 best = d

@@ -23,11 +23,12 @@ of arrays, which numba compiles and caches like its arrays). Imported on demand 
 start-up is not for the drawing side).
 
 Until compiling pays (`compiled_pays`: the kernels already in numba's cache, or enough queries
-answered in this process), the same queries run in numpy (`signed_distances_numpy`,
+answered in this process), the same queries run without numba (`signed_distances_numpy`,
 `build_hierarchy_numpy`), so that a short first run on a fresh install never waits for numba's
-compiler. They give the very numbers the kernels give: the same IEEE operations per element in the
-same order, every face that could hold the closest point measured, and among equally near faces
-the one the kernel's descent meets first.
+compiler. They give the very numbers the kernels give: the hierarchy built in numpy with the same
+IEEE operations per element in the same order; the distances by the kernel's own descent replayed
+in Python floats (the same operations, the same nodes in the same order, so among equally near
+faces the one the kernel meets first).
 """
 
 from __future__ import annotations
@@ -447,7 +448,6 @@ _numpy_seconds = [0.0]
 TALLY = "signed-distance-numpy-s"  # the counter of numpy seconds in the tally of earlier runs
 _KERNEL_SOURCES = (__file__, str(Path(__file__).with_name("penetration.py")))
 _preferred: list[bool] = []
-_CHUNK = 1 << 21  # point-leaf pairs a numpy query holds at once (a few tens of MB)
 
 
 def compiled_pays(*kernels) -> bool:
@@ -463,10 +463,10 @@ def compiled_pays(*kernels) -> bool:
     return _numpy_seconds[0] + numpytally.carried(TALLY, *_KERNEL_SOURCES) > PAYS_AFTER_S
 
 
-# Faces a mesh may have for its queries to run in numpy before compiling pays. The numpy forms search
-# every leaf of the hierarchy for each point and replay branch and bound point by point, so their
-# cost grows with the mesh: on real teeth (about 40,000 faces) a real jaw's rest interpenetration
-# took 213 s in numpy against 25 s compiled, cold (2026-11-29, quiet two-core machine). Above this
+# Faces a mesh may have for its queries to run in numpy before compiling pays. The numpy forms replay
+# branch and bound point by point in Python, so their cost grows with the mesh: on real teeth (about
+# 40,000 faces) a real jaw's rest interpenetration took 213 s in numpy against 25 s compiled, cold
+# (2026-11-29, quiet two-core machine, when each point searched every leaf in numpy). Above this
 # many faces in a mesh a query compiles at once (once per machine); the parametric teeth (4,500 to
 # 7,000 faces, the demo's) stay on numpy until it pays.
 NUMPY_AT_MOST_FACES = 10_000
@@ -539,81 +539,18 @@ def node_gaps_numpy(P, s, nodes):
     return np.maximum(sphere, np.sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]))
 
 
-def _first_in_descent(p, s, tied):
-    """Of the tied rows of `triangles` (equally near p (3,)), the one `signed_distances` meets first:
-    its descent takes the nearer child first (the right one on a tie), a leaf's rows in order."""
-    k = 0
-    while s.left[k] >= 0:
-        l, r = s.left[k], s.right[k]
-        in_left = tied < s.start[r]  # the left child holds the first half of the node's rows
-        if in_left.all() or not in_left.any():  # all in one child: the order of the two cannot matter
-            k = l if in_left.all() else r
-            continue
-        gl, gr = node_gaps_numpy(p[None], s, np.array([l, r]))[0]
-        tied, k = (tied[in_left], l) if gl < gr else (tied[~in_left], r)
-    return int(tied.min())
-
-
-def _nearest_rows(P, s, leaves):
-    """For each point P (m, 3): the row of `triangles` holding its closest surface point and the
-    squared distance (the first met by the compiled descent among equally near rows). Candidates:
-    every leaf whose gap does not exceed the distance to the nearest-gap leaf's faces."""
-    gaps = node_gaps_numpy(P, s, leaves)
-    m = len(P)
-    nearest = np.argmin(gaps, axis=1)
-    first = leaves[nearest]
-    span = int(s.count[first].max())
-    rows = np.minimum(s.start[first][:, None] + np.arange(span), (s.start[first] + s.count[first] - 1)[:, None])
-    Pr = np.repeat(P, span, axis=0)
-    _, x, y, z = closest_on_triangles_numpy(Pr, s.triangles[rows.reshape(-1)])
-    bound = squared_distances(Pr, x, y, z).reshape(m, span).min(axis=1)
-    candidate = ~((gaps > 0.0) & (gaps * gaps > bound[:, None]))
-    candidate[np.arange(m), nearest] = True
-    point, leaf = np.nonzero(candidate)
-    count = s.count[leaves[leaf]]
-    point = np.repeat(point, count)
-    row = np.repeat(s.start[leaves[leaf]] - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
-    _, x, y, z = closest_on_triangles_numpy(P[point], s.triangles[row])
-    d2 = squared_distances(P[point], x, y, z)
-    best = np.full(m, np.inf)
-    np.minimum.at(best, point, d2)
-    at_best = np.flatnonzero(d2 == best[point])
-    tied_point, tied_row = point[at_best], row[at_best]  # sorted by point
-    first = np.searchsorted(tied_point, np.arange(m))
-    chosen = tied_row[first]
-    ties = np.diff(np.append(first, len(tied_point)))
-    for i in np.flatnonzero(ties > 1):  # equally near faces: the one the kernel's descent meets first
-        chosen[i] = _first_in_descent(P[i], s, tied_row[first[i]:first[i] + ties[i]])
-    return chosen, best
-
-
 def signed_distances_numpy(points, s, cap):
-    """`signed_distances` in numpy, the same numbers: for each of the points (n, 3), its signed
-    distance to the surface of `s` (mm, negative inside, +inf beyond `cap` mm) and the face holding
-    its closest point (-1 beyond the cap). For a process that has not compiled the kernels yet."""
+    """`signed_distances` before compiling, the same numbers: for each of the points (n, 3), its
+    signed distance to the surface of `s` (mm, negative inside, +inf beyond `cap` mm) and the face
+    holding its closest point (-1 beyond the cap). The kernel's descent replayed point by point in
+    Python floats (`_descend`): it visits a few dozen nodes a point where a search of every leaf in
+    numpy measured them all, and it meets equally near faces in the kernel's order by construction."""
     started = time.perf_counter()
-    points = np.ascontiguousarray(points, float).reshape(-1, 3)
-    n = len(points)
-    out, faces = np.full(n, np.inf), np.full(n, -1, np.int64)
-    leaves = np.flatnonzero(s.left < 0)
-    step = max(1, _CHUNK // len(leaves))
-    for lo in range(0, n, step):
-        P = points[lo:lo + step]
-        row, best2 = _nearest_rows(P, s, leaves)
-        near = np.flatnonzero(best2 < cap * cap)
-        if not len(near):
-            continue
-        r = row[near]
-        feature, x, y, z = closest_on_triangles_numpy(P[near], s.triangles[r])
-        f = s.order[r]
-        normal = np.where((feature == 0)[:, None], s.face_normals[f],
-                          np.where(((feature >= 1) & (feature <= 3))[:, None],
-                                   s.vertex_normals[s.faces[f, np.clip(feature - 1, 0, 2)]],
-                                   s.edge_normals[s.face_edges[f, np.clip(feature - 4, 0, 2)]]))
-        Q = P[near]
-        outside = (Q[:, 0] - x) * normal[:, 0] + (Q[:, 1] - y) * normal[:, 1] + (Q[:, 2] - z) * normal[:, 2] > 0.0
-        out[lo + near] = np.where(outside, 1.0, -1.0) * np.sqrt(best2[near])
-        faces[lo + near] = f
+    cap2 = float(cap) * float(cap)
+    points = np.asarray(points, float).reshape(-1, 3).tolist()
+    answers = [_signed_distance_plain(px, py, pz, s, cap2) for px, py, pz in points]
+    out = np.array([d for d, _ in answers], float).reshape(-1)
+    faces = np.array([f for _, f in answers], np.int64).reshape(-1)
     _spent_numpy(started)
     return out, faces
 
@@ -676,10 +613,70 @@ def _hierarchy_shape(n: int, leaf_faces: int):
     return tuple(np.array(v, np.int64) for v in (start, end, level, left, right))
 
 
-# One point at a time (the depth searches' branch and bound asks one point a step), numpy's call
-# overhead outweighs its arithmetic: the kernel's own descent in plain Python floats (IEEE doubles,
-# the same operations in the same order, so the same bits, and the same face on ties by construction).
-# Values are read with `ndarray.item` (no copy of the mesh's arrays is kept), a leaf's corners as a list.
+# One point at a time (the depth searches' branch and bound asks one point a step, and a batch's
+# points each need only a few dozen of the hierarchy's nodes), numpy's call overhead outweighs its
+# arithmetic: the kernel's own descent in plain Python floats (IEEE doubles, the same operations in
+# the same order, so the same bits, and the same face on ties by construction).
+# The descent reads a plain copy of the hierarchy (`_plain`: tuples of Python floats, made once a
+# surface), not the arrays: an `ndarray.item` costs about what a node's whole gap does.
+
+
+class _PlainSurface(NamedTuple):
+    """The part of `SurfaceArrays` the one-point queries read, as Python lists: per node, its gap's
+    ten floats (`nodes`: centre x, y, z, radius, box lo x, y, z, hi x, y, z) and its children
+    (`kids`: (left, right), None for a leaf); per leaf, its rows of `triangles` (`leaf_rows`,
+    filled on a leaf's first visit: (row, its 9 corner floats) each); the mesh's `vertices` and
+    `faces` as lists."""
+
+    nodes: list
+    kids: list
+    leaf_rows: list
+    vertices: list
+    faces: list
+
+
+# What `_plain` copies: a moved or placed copy of a surface (`MeshSurface.moved`, the depth's
+# `_replace(node_center=...)`) shares some of these arrays and not others, so all are checked.
+_PLAIN_FIELDS = ("node_center", "node_radius", "node_lo", "node_hi", "left", "right", "start", "count", "triangles",
+                 "vertices", "faces")
+_PLAINS: dict[int, tuple] = {}  # id(node_center) -> (weak references to the _PLAIN_FIELDS arrays, their _PlainSurface)
+_LAST_PLAIN: list = [(None, None)]  # (surface asked last, its _PlainSurface): a search asks one surface in a row
+
+
+def _plain(s: SurfaceArrays) -> _PlainSurface:
+    """The `_PlainSurface` of `s`, made on first use and kept while its arrays live (they are the
+    model, never written: the copy stays exact). A different surface, or a copy of this one with
+    other arrays, gets its own."""
+    last = _LAST_PLAIN[0]  # read once: another thread may ask another surface meanwhile
+    if last[0] is s:  # the very tuple, so the very arrays
+        return last[1]
+    plain = _plain_of_arrays(s)
+    _LAST_PLAIN[0] = (s, plain)
+    return plain
+
+
+def _plain_of_arrays(s: SurfaceArrays) -> _PlainSurface:
+    """`_plain`, looked up by the arrays themselves (a surface's tuple may be made anew per query)."""
+    arrays = [getattr(s, name) for name in _PLAIN_FIELDS]
+    entry = _PLAINS.get(id(s.node_center))
+    if entry is not None and all(ref() is a for ref, a in zip(entry[0], arrays)):
+        return entry[1]
+    for key in [k for k, (refs, _) in _PLAINS.items() if any(ref() is None for ref in refs)]:
+        _PLAINS.pop(key, None)
+    nodes = list(zip(*s.node_center.T.tolist(), s.node_radius.tolist(), *s.node_lo.T.tolist(), *s.node_hi.T.tolist()))
+    kids = [None if l < 0 else (l, r) for l, r in zip(s.left.tolist(), s.right.tolist())]
+    plain = _PlainSurface(nodes, kids, [None] * len(nodes), s.vertices.tolist(), s.faces.tolist())
+    _PLAINS[id(s.node_center)] = ([weakref.ref(a) for a in arrays], plain)
+    return plain
+
+
+def _leaf_rows(s: SurfaceArrays, plain: _PlainSurface, k: int) -> list:
+    """Leaf k's rows of `triangles` with their corners, [(row, 9 floats: a, b, c)], in row order."""
+    rows = plain.leaf_rows[k]
+    if rows is None:
+        first, count = s.start.item(k), s.count.item(k)
+        rows = plain.leaf_rows[k] = list(enumerate(s.triangles[first:first + count].reshape(-1, 9).tolist(), first))
+    return rows
 
 
 def closest_on_triangle_scalar(px, py, pz, t):
@@ -718,58 +715,99 @@ def closest_on_triangle_scalar(px, py, pz, t):
     return 0, ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
 
 
-def _node_gap_scalar(px, py, pz, s, k):
-    """`node_gap` in Python floats."""
-    c, lo, hi = s.node_center, s.node_lo, s.node_hi
-    dx, dy, dz = px - c.item(k, 0), py - c.item(k, 1), pz - c.item(k, 2)
-    sphere = math.sqrt(dx * dx + dy * dy + dz * dz) - s.node_radius.item(k)
-    bx = max(lo.item(k, 0) - px, 0.0, px - hi.item(k, 0))
-    by = max(lo.item(k, 1) - py, 0.0, py - hi.item(k, 1))
-    bz = max(lo.item(k, 2) - pz, 0.0, pz - hi.item(k, 2))
-    return max(sphere, math.sqrt(bx * bx + by * by + bz * bz))
+def _node_gap_plain(px, py, pz, node):
+    """`node_gap` in Python floats, of a `_PlainSurface.nodes` entry. The kernel's max(a, 0.0, b) is
+    written out as Python's max evaluates it (the first of the largest; `>` only), and so is the
+    outer max: the same value, without a builtin call."""
+    cx, cy, cz, radius, lx, ly, lz, hx, hy, hz = node
+    dx, dy, dz = px - cx, py - cy, pz - cz
+    sphere = math.sqrt(dx * dx + dy * dy + dz * dz) - radius
+    bx = lx - px
+    if 0.0 > bx:
+        bx = 0.0
+    if px - hx > bx:
+        bx = px - hx
+    by = ly - py
+    if 0.0 > by:
+        by = 0.0
+    if py - hy > by:
+        by = py - hy
+    bz = lz - pz
+    if 0.0 > bz:
+        bz = 0.0
+    if pz - hz > bz:
+        bz = pz - hz
+    box = math.sqrt(bx * bx + by * by + bz * bz)
+    return box if box > sphere else sphere
 
 
-def signed_distance_scalar(p, s, cap):
-    """`closest_face` of the one point p (3,) in Python floats: (signed distance mm, face)."""
-    started = time.perf_counter()
-    left, right, start, count = s.left, s.right, s.start, s.count
-    px, py, pz = float(p[0]), float(p[1]), float(p[2])
-    best2, best_i, best_feat, bx, by, bz = cap * cap, -1, 0, 0.0, 0.0, 0.0
-    stack = [(0, _node_gap_scalar(px, py, pz, s, 0))]
-    while stack:
-        k, gap = stack.pop()
-        if gap > 0.0 and gap * gap >= best2:
-            continue
-        if left.item(k) < 0:
-            first = start.item(k)
-            for i, t in enumerate(s.triangles[first:first + count.item(k)].reshape(-1, 9).tolist(), first):
+def _descend(px, py, pz, s, best2):
+    """The kernel's descent (`signed_distances`, one point) in Python floats: (squared distance, row
+    of `triangles`, feature, closest point x, y, z) of the nearest face closer than sqrt(best2);
+    row -1 where none is. The nearer child is taken at once and the farther one kept for later,
+    unless its gap already rules it out: best2 only shrinks, so the kernel's stack would drop it
+    when popped. The nodes met, and their order, are the kernel's."""
+    plain = _plain(s)
+    nodes, kids, leaf_rows = plain.nodes, plain.kids, plain.leaf_rows
+    best_i, best_feat, bx, by, bz = -1, 0, 0.0, 0.0, 0.0
+    waiting = []
+    k, gap = 0, _node_gap_plain(px, py, pz, nodes[0])
+    while True:
+        if not (gap > 0.0 and gap * gap >= best2):
+            pair = kids[k]
+            if pair is not None:
+                l, r = pair
+                gl, gr = _node_gap_plain(px, py, pz, nodes[l]), _node_gap_plain(px, py, pz, nodes[r])
+                if gl < gr:  # the nearer child first (the right one on a tie)
+                    k, gap, l, gl = l, gl, r, gr
+                else:
+                    k, gap = r, gr
+                if not (gl > 0.0 and gl * gl >= best2):
+                    waiting.append((l, gl))
+                continue
+            rows = leaf_rows[k]
+            if rows is None:
+                rows = _leaf_rows(s, plain, k)
+            for i, t in rows:
                 feat, x, y, z = closest_on_triangle_scalar(px, py, pz, t)
                 d2 = (px - x) * (px - x) + (py - y) * (py - y) + (pz - z) * (pz - z)
                 if d2 < best2:
                     best2, best_i, best_feat, bx, by, bz = d2, i, feat, x, y, z
-            continue
-        l, r = left.item(k), right.item(k)
-        gl, gr = _node_gap_scalar(px, py, pz, s, l), _node_gap_scalar(px, py, pz, s, r)
-        if gl < gr:  # nearer child popped first
-            l, r, gl, gr = r, l, gr, gl
-        stack.append((l, gl))
-        stack.append((r, gr))
-    _spent_numpy(started)
+        if not waiting:
+            return best2, best_i, best_feat, bx, by, bz
+        k, gap = waiting.pop()
+
+
+def _signed_distance_plain(px, py, pz, s, cap2):
+    """`closest_face` of the point (px, py, pz) in Python floats, no farther than sqrt(cap2) mm:
+    (signed distance mm, face); (+inf, -1) where no face is that near."""
+    best2, best_i, best_feat, bx, by, bz = _descend(px, py, pz, s, cap2)
     if best_i < 0:
         return math.inf, -1
-    f = int(s.order[best_i])
+    f = s.order.item(best_i)
     if best_feat == 0:
-        n = s.face_normals[f]
+        n, k = s.face_normals, f
     elif best_feat <= 3:
-        n = s.vertex_normals[s.faces[f, best_feat - 1]]
+        n, k = s.vertex_normals, s.faces.item(f, best_feat - 1)
     else:
-        n = s.edge_normals[s.face_edges[f, best_feat - 4]]
-    outside = (px - bx) * float(n[0]) + (py - by) * float(n[1]) + (pz - bz) * float(n[2]) > 0.0
+        n, k = s.edge_normals, s.face_edges.item(f, best_feat - 4)
+    outside = (px - bx) * n.item(k, 0) + (py - by) * n.item(k, 1) + (pz - bz) * n.item(k, 2) > 0.0
     return (1.0 if outside else -1.0) * math.sqrt(best2), f
 
 
+def signed_distance_scalar(p, s, cap):
+    """`closest_face` of the one point p (3 floats) in Python floats: (signed distance mm, face)."""
+    started = time.perf_counter()
+    answer = _signed_distance_plain(float(p[0]), float(p[1]), float(p[2]), s, cap * cap)
+    _spent_numpy(started)
+    return answer
+
+
 def distance_to_face_scalar(p, s, f) -> float:
-    """`distance_to_face` in Python floats: mm from p (3,) to face f of `s`."""
+    """`distance_to_face` in Python floats: mm from p (3 floats) to face f of `s`."""
     px, py, pz = float(p[0]), float(p[1]), float(p[2])
-    _, x, y, z = closest_on_triangle_scalar(px, py, pz, s.vertices[s.faces[f]].reshape(-1).tolist())
+    plain = _plain(s)
+    a, b, c = plain.faces[f]
+    vertices = plain.vertices
+    _, x, y, z = closest_on_triangle_scalar(px, py, pz, vertices[a] + vertices[b] + vertices[c])
     return math.sqrt((px - x) * (px - x) + (py - y) * (py - y) + (pz - z) * (pz - z))

@@ -62,6 +62,26 @@ def test_signed_distances_in_numpy_are_the_compiled_ones(paper_teeth):
                 assert np.array_equal(np.signbit(d), np.signbit(d_np))
 
 
+def test_one_point_at_a_time_in_python_floats_is_the_compiled_query_on_every_copy_of_a_surface(paper_teeth):
+    """The one-point form reads a plain copy of a surface's hierarchy, kept between queries: asked in
+    turn about two teeth, a moved copy (other corners, normals and spheres) and a copy whose spheres
+    alone were placed elsewhere (the depth's `_replace(node_center=...)`), each answers from its own
+    arrays, as the compiled query does; a copy made anew for every query too."""
+    rng = np.random.default_rng(3)
+    first, second = mesh_surface(paper_teeth.teeth[21].mesh), mesh_surface(paper_teeth.teeth[36].mesh)
+    moved = first.moved(_turn(rng, 20.0) @ trimesh.transformations.translation_matrix(rng.normal(size=3)))
+    placed = first.arrays._replace(node_center=np.ascontiguousarray(moved.node_center))
+    V = first.arrays.vertices
+    points = np.concatenate([V[::25], V[::25] + rng.uniform(-1, 1, V[::25].shape)])  # vertices: faces tied
+    for _ in range(2):
+        for arrays in (first.arrays, second.arrays, moved, placed, first.arrays._replace()):
+            d, f = signed_distances(points, arrays, np.inf)
+            answers = [signeddistance.signed_distance_scalar(p, arrays, np.inf) for p in points]
+            assert np.array_equal(f, [face for _, face in answers])
+            assert np.array_equal(d, [distance for distance, _ in answers])
+            assert np.array_equal(np.signbit(d), np.signbit([distance for distance, _ in answers]))
+
+
 def _pushed_together(rng, teeth, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
     """Rest pose of a, and b moved a random part of the way onto a and turned a few degrees."""
     pose_a, pose_b = teeth[a].rest_pose, teeth[b].rest_pose.copy()
