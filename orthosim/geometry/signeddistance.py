@@ -441,8 +441,9 @@ def surface_within(p, rho, s):
 # steps spend a few seconds in numpy and never compile; a long run compiles once, for every later
 # run too. Wall seconds (reading a thread's CPU clock costs more here than a query), so a loaded
 # machine compiles sooner.
-# The seconds count across runs too (`orthosim.storage.numpytally`): about the third to eighth
-# demo compiles, not none.
+# The seconds count across runs too (`orthosim.storage.numpytally`): the demo spends about 1.5 s
+# of numpy queries a run (quiet two-core machine, 2026-11-29), so about its 8th to 20th run
+# compiles (sooner on a loaded machine), not none.
 PAYS_AFTER_S = 30.0
 _numpy_seconds = [0.0]
 TALLY = "signed-distance-numpy-s"  # the counter of numpy seconds in the tally of earlier runs

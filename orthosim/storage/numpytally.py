@@ -3,11 +3,11 @@
 A run answers its depth and signed-distance queries in numpy until compiling numba's kernels pays
 (`orthosim.geometry.signeddistance.compiled_pays`), so that a short run never waits for the
 compiler. Counted in one process only, a user who makes nothing but short runs would never
-compile, and every run would pay numpy's price again (the demo: 16.4 s warm against 13.9 s with
-the kernels compiled, the quiet two-core machine, 2026-11-29). So each process adds the seconds it
-spent to this tally, and a run compiles once what earlier runs spent and what it spends itself
-pass the threshold together: the demo spends 4-12 s there, so about its third to eighth run
-compiles, once, for every later run. (The detectors' descent keeps its own per-process rule:
+compile, and every run would pay numpy's price again. So each process adds the seconds it spent
+to this tally, and a run compiles once what earlier runs spent and what it spends itself pass the
+threshold together: the demo spends about 1.5 s there on the quiet two-core machine (3-4 s before
+the numpy forms replayed the kernel's descent in Python floats, 2026-11-29), more under load, so
+about its 8th to 20th run compiles, once, for every later run. (The detectors' descent keeps its own per-process rule:
 loading its kernels costs more than a short run's numpy descents.)
 
 The tally belongs to one compile: its key is the kernels' source files with their modification
