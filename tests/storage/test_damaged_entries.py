@@ -1,5 +1,5 @@
 """Nothing orthosim keeps in its cache is trusted unchecked: a damaged entry of any kind (a built
-dentition, a sphere tree, a tree fit) gives the clean-cache result with one warning naming it, never
+dentition, a sphere tree, a tree fit, a first step's patch) gives the clean-cache result with one warning naming it, never
 a traceback and never a different result."""
 
 from __future__ import annotations
@@ -15,6 +15,9 @@ import numpy as np
 import pytest
 import trimesh
 
+from orthosim.collision import Body, CollisionModel, ExactQueries
+from orthosim.collision.patchcache import PatchCache
+from orthosim.geometry.pose import translation
 from orthosim.model.dentition_cache import cached_dentition, entry_path
 from orthosim.spheretree import cached_sphere_tree
 from orthosim.spheretree.build import default_branching
@@ -22,12 +25,13 @@ from orthosim.spheretree.cache import _entry
 from orthosim.spheretree.fitcache import cached_fit, fits_dir
 from orthosim.storage.cacheentry import DamagedEntryWarning
 from cli_helpers import orthosim as run, quick_case, said_lines
+from collision_helpers import median_split_tree
 from model_helpers import small_dentition
 
 TREE_DEPTH = 3
 BRANCHING = default_branching("fit", None)
 FIT_SAMPLES = {"sphere_samples": 2_000, "n_surface": 1_000, "n_interior": 500}
-TRIALS_PER_DAMAGE = 8  # per kind of entry and kind of damage: 3 x 4 x 8 = 96 damaged files
+TRIALS_PER_DAMAGE = 8  # per kind of entry and kind of damage: 4 x 4 x 8 = 128 damaged files
 
 
 def _capsule(radius_mm: float) -> trimesh.Trimesh:
@@ -73,6 +77,30 @@ def _dentition_params(i: int) -> dict:
     return {"kind": "test", "size_mm": 8.0 + i}
 
 
+def _patch_queries(folder: Path, i: int) -> ExactQueries:
+    """Exact queries of two spheres 0.2 mm apart (the second a little larger for i = 1) that have
+    asked their distance once, their patches read from and kept in `folder`."""
+    a, b = trimesh.creation.icosphere(subdivisions=3, radius=3.0), trimesh.creation.icosphere(subdivisions=3, radius=2.0 + 0.1 * i)
+    model = CollisionModel([Body(1, a, median_split_tree(a), np.eye(4)), Body(2, b, median_split_tree(b), np.eye(4))])
+    queries = ExactQueries(model)
+    queries.patch_cache = PatchCache(folder / "patches")
+    queries.distance((1, 2), {1: np.eye(4), 2: translation([5.2 + 0.1 * i, 0.1, -0.05])})
+    return queries
+
+
+def _patch_faces(folder: Path, i: int):
+    patch = _patch_queries(folder, i)._patches[(0, 1)]
+    return patch.faces_i, patch.faces_j
+
+
+def _patch_path(folder: Path, i: int) -> Path:
+    queries = _patch_queries(folder, i)
+    patch = queries._patches[(0, 1)]
+    key = queries.patch_cache.key(queries._mesh_digest(0), queries._mesh_digest(1), patch.rel_ij, patch.rel_ji,
+                                  queries.patch_reach_mm)
+    return folder / "patches" / f"{key}.npz"
+
+
 KINDS = [
     EntryKind("dentition",
               lambda folder, i: cached_dentition(_dentition_params(i), lambda: small_dentition(8.0 + i), cache_dir=folder),
@@ -84,6 +112,8 @@ KINDS = [
               lambda folder, i: cached_fit(_capsule(2.5 + i), depth=TREE_DEPTH, cache_dir=folder, samples=FIT_SAMPLES),
               lambda folder, i: fits_dir(folder) / f"{_tree_path(folder, i).stem}-{_samples_tag()}.json",
               lambda a, b: a == b),
+    EntryKind("patch", _patch_faces, _patch_path,
+              lambda a, b: all(np.array_equal(x, y) and x.dtype == y.dtype for x, y in zip(a, b))),
 ]
 
 
@@ -100,7 +130,8 @@ def _flip_bit(path: Path, rng: random.Random, other: Path) -> None:
 
 
 def _non_finite(path: Path, rng: random.Random, other: Path) -> None:
-    """Fill one float array (or one JSON number) with NaN or inf, keeping the rest, header included."""
+    """Fill one float array (or one JSON number) with NaN or inf, keeping the rest, header included;
+    an entry of integers alone (a patch's face indices) gets -1, a face no mesh has, instead."""
     value = rng.choice([np.nan, np.inf, -np.inf])
     if path.suffix == ".json":
         document = json.loads(path.read_text())
@@ -110,8 +141,11 @@ def _non_finite(path: Path, rng: random.Random, other: Path) -> None:
         return
     with np.load(path) as z:
         arrays = {k: z[k].copy() for k in z.files}
-    name = rng.choice(sorted(k for k, a in arrays.items() if a.dtype.kind == "f" and a.size))
-    arrays[name][...] = value
+    floats = sorted(k for k, a in arrays.items() if a.dtype.kind == "f" and a.size)
+    if floats:
+        arrays[rng.choice(floats)][...] = value
+    else:
+        arrays[rng.choice(sorted(k for k, a in arrays.items() if a.dtype.kind == "i" and a.size))][...] = -1
     with open(path, "wb") as fh:
         np.savez(fh, **arrays)
 
