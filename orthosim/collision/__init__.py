@@ -10,7 +10,8 @@ tree descent) and `descent_compiled` (its numba form), `time_of_contact` (Eq. 2 
 `queries` (a run's exact answers on the meshes, through `orthosim.geometry.meshquery`), `patchcache`
 (the first step's patches kept between runs), `detect`
 (the entry points: `detect_step`, `contacts`), `contact_area` (the exact contact faces inside
-overlapping leaves) and `trianglepairs` (its compiled test of triangle pairs within a distance), `interpenetration` (what a model's teeth overlap at rest), `validate`
+overlapping leaves) with `trianglepairs` (its compiled test of triangle pairs within a distance) and
+`crossings_compiled` (its compiled inside test), `interpenetration` (what a model's teeth overlap at rest), `validate`
 (accuracy studies). How a tooth moves within a step (the motion every detector assumes) is
 `orthosim.geometry.motion`; the detector timings are `orthosim_bench.collision`.
 """
