@@ -20,6 +20,9 @@ import numpy as np
 from numba import njit
 
 from orthosim.spheretree.inside import CrossingIndex
+from orthosim.system.firstrun import announce_compiles
+
+announce_compiles()  # a kernel compiled here (not loaded from numba's cache) says so on stderr
 
 
 @njit(cache=True, nogil=True)

@@ -16,6 +16,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from orthosim.system.firstrun import announce_compiles
+
+announce_compiles()  # a kernel compiled here (not loaded from numba's cache) says so on stderr
+
 
 @njit(cache=True, nogil=True, inline="always")
 def _dot(a0, a1, a2, b0, b1, b2):
