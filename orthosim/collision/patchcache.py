@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from orthosim.errors import DamagedFileError
-from orthosim.storage.cacheentry import damaged, read_arrays, warn_damaged, write_arrays
+from orthosim.storage.cacheentry import arrays_digest, damaged, read_arrays, warn_damaged, write_arrays
 from orthosim.storage.sourcedigest import source_digest
 
 ENTRY_KIND = "patches"
@@ -46,11 +46,7 @@ def _cut_source_digest() -> str:
 
 def mesh_digest(vertices: np.ndarray, faces: np.ndarray) -> str:
     """Hex SHA-256 of a mesh's vertices and faces (dtype, shape and bytes of each)."""
-    h = hashlib.sha256()
-    for a in (np.ascontiguousarray(vertices), np.ascontiguousarray(faces)):
-        h.update(f"{a.dtype.str}{a.shape}".encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
+    return arrays_digest({"vertices": vertices, "faces": faces})
 
 
 class PatchCache:

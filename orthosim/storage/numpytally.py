@@ -29,7 +29,7 @@ import threading
 from pathlib import Path
 
 from orthosim.errors import DamagedFileError
-from orthosim.storage.cacheentry import read_json, warn_damaged, write_json
+from orthosim.storage.cacheentry import damaged, read_json, warn_damaged, write_json
 
 KIND = "numpy-tally"
 _FILE = Path("firstrun") / "numpy-tally.json"
@@ -65,18 +65,15 @@ def _read() -> dict:
         return {}
     try:
         payload = read_json(path, KIND, "tally")
-    except FileNotFoundError:
+    except FileNotFoundError:  # removed meanwhile (read_json turns any other failure into damage)
         return {}
     except DamagedFileError as error:
         warn_damaged("numpy tally", error)
         return {}
-    except OSError:
-        return {}
     if not isinstance(payload, dict) or not all(
             isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v < float("inf")
             for k, v in payload.items()):
-        warn_damaged("numpy tally", DamagedFileError(path, None, "its counts are not non-negative numbers",
-                                                      "delete it; orthosim rebuilds it"))
+        warn_damaged("numpy tally", damaged(path, "its counts are not non-negative numbers"))
         return {}
     return payload
 
